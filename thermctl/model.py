@@ -1,0 +1,491 @@
+r"""Bilinear thermal dynamics of a network: CasADi model, simulation, linearization.
+
+For every state node :math:`i` with capacitance :math:`C_i`,
+
+.. math::
+
+    C_i \dot T_i = \sum_{j \sim i} g_{ij} (T_j - T_i)
+                   + [i \text{ zone}]\,\big(\dot m_{s,i} c_p (T_{s,i} - T_i) + Q_i\big),
+
+where the sum runs over the resistive links of the 3R2C chains (:math:`g = 1/R`),
+:math:`T_j` may be a boundary temperature (an input), and the supply term makes
+the model bilinear. Convection edges have :math:`R_1=R_2=R_3=\bar R_v d` and
+:math:`C_1=C_2=C_v`.
+
+The parameter vector of the CasADi functions is per convection edge:
+``p = [rbar_v[e] for e in convection edges] + [c_v[e] for e ...]`` (length ``2m``);
+:meth:`ThermalModel.expand` maps the paper's shared ``(rbar_v, c_v)`` onto it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import control as ct
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .errors import ModelError
+from .network import ThermalNetwork
+
+__all__ = ["ThermalModel", "CasadiModel", "zoh", "RBAR_V_PAPER", "C_V_PAPER"]
+
+RBAR_V_PAPER = 3.36e-4
+"""Convection resistance per unit distance identified by Goyal et al. [K/(W m)]."""
+C_V_PAPER = 1.19e3
+"""Convection capacitance identified by Goyal et al. [J/K]."""
+
+_DENSE_LIMIT = 400  # above this many states, sparse LU beats dense linear algebra
+
+
+def zoh(A, dt: float):
+    r"""Exact zero-order-hold discretisation of :math:`\dot x = A x + b`.
+
+    Uses Van Loan's block exponential
+    :math:`\exp\left(\begin{bmatrix}A & I\\0 & 0\end{bmatrix} dt\right)
+    = \begin{bmatrix}\Phi & \Gamma\\0 & I\end{bmatrix}`, so that
+    :math:`x_{k+1} = \Phi x_k + \Gamma b_k` for any constant :math:`b_k`, also
+    when :math:`A` is singular.
+
+    Parameters
+    ----------
+    A : array_like, shape (n, n)
+        State matrix [1/s].
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    Phi, Gamma : ndarray, shape (n, n)
+    """
+    A = A.toarray() if sp.issparse(A) else np.asarray(A, dtype=float)
+    n = A.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = A * dt
+    M[:n, n:] = np.eye(n) * dt
+    E = sla.expm(M)
+    return E[:n, :n], E[:n, n:]
+
+
+@dataclass
+class CasadiModel:
+    """The symbolic model handed to optimisation code.
+
+    Attributes
+    ----------
+    f : casadi.Function
+        ``f(x, u, p) -> xdot`` [K/s].
+    F : casadi.Function
+        ``F(x, u, p, dt) -> x_next``: one ZOH step with an L-stable 3rd-order
+        (Radau IIA) rational approximation of the exponential over ``substeps``
+        sub-steps — suitable for the stiff convection edges.
+    x, u, p : casadi.SX
+        The symbols ``f`` was built from.
+    state_names, input_names, param_names : list of str
+    p_value : ndarray
+        The model's current parameter vector.
+    substeps : int
+    """
+
+    f: ca.Function
+    F: ca.Function
+    x: ca.SX
+    u: ca.SX
+    p: ca.SX
+    state_names: list
+    input_names: list
+    param_names: list
+    p_value: np.ndarray
+    substeps: int
+
+
+class _Symbolic:
+    """CasADi expressions of a network, built once per network."""
+
+    def __init__(self, net: ThermalNetwork):
+        self.net = net
+        nx, nu = net.n_states, net.n_inputs
+        conv = net.convection_edges
+        m = len(conv)
+        d = np.array([e.d for e in conv], dtype=float)
+        ends, R, ce = net.links()
+        cap_fixed = net.fixed_capacitances()
+        cse = net.conv_state_edge()
+        x = ca.SX.sym("x", nx)
+        u = ca.SX.sym("u", nu)
+        p = ca.SX.sym("p", 2 * m)
+        rbar, cv = p[:m], p[m:]
+        cap = [cap_fixed[i] if cse[i] < 0 else cv[int(cse[i])] for i in range(nx)]
+        nb = len(net.boundary)
+        sl = net.input_slices()
+        A = ca.SX(nx, nx)
+        Bt = ca.SX(nx, nb)
+        for (i, j), r, k in zip(ends, R, ce):
+            g = 1.0 / r if k < 0 else 1.0 / (rbar[int(k)] * d[int(k)])
+            for s, t in ((i, j), (j, i)):
+                if s >= nx:
+                    continue  # boundary nodes have no equation
+                A[s, s] -= g / cap[s]
+                if t < nx:
+                    A[s, t] += g / cap[s]
+                else:
+                    Bt[s, t - nx] += g / cap[s]
+        nz = net.n_zones
+        Cz = cap_fixed[:nz]
+        cp = net.spec.cp
+        self.kz = cp / Cz  # supply term per unit mass flow: ms·kz·(Ts − T) [K/s per kg/s·K]
+        self.inv_cz = 1.0 / Cz
+        ms, Ts, Tb, Q = u[sl["ms"]], u[sl["Ts"]], u[sl["T"]], u[sl["Q"]]
+        zone_rows = ms * self.kz * (Ts - x[:nz]) + Q * self.inv_cz
+        xdot = ca.mtimes(A, x) + ca.mtimes(Bt, Tb) + ca.vertcat(zone_rows, ca.SX(nx - nz, 1))
+        self.x, self.u, self.p = x, u, p
+        self.f = ca.Function("f", [x, u, p], [xdot], ["x", "u", "p"], ["xdot"])
+        self.jacobians = ca.Function("jacobians", [x, u, p],
+                                     [ca.jacobian(xdot, x), ca.jacobian(xdot, u)],
+                                     ["x", "u", "p"], ["dfdx", "dfdu"])
+        self.AB = ca.Function("AB", [p], [A, Bt], ["p"], ["A", "Bt"])
+        cap_all = ca.vertcat(*cap)
+        self.cap = ca.Function("cap", [p], [cap_all], ["p"], ["cap"])
+        self.param_names = ([f"rbar_v[{e.name}]" for e in conv] + [f"c_v[{e.name}]" for e in conv])
+        self._F = {}
+
+    def step(self, substeps: int) -> ca.Function:
+        """``F(x, u, p, dt)``: ZOH step by the Radau IIA (Padé 1/2) rational of the exponential."""
+        if substeps in self._F:
+            return self._F[substeps]
+        net = self.net
+        nx, nz = net.n_states, net.n_zones
+        x = ca.MX.sym("x", nx)
+        u = ca.MX.sym("u", net.n_inputs)
+        p = ca.MX.sym("p", self.p.numel())
+        dt = ca.MX.sym("dt")
+        A, Bt = self.AB(p)
+        sl = net.input_slices()
+        ms, Ts, Tb, Q = u[sl["ms"]], u[sl["Ts"]], u[sl["T"]], u[sl["Q"]]
+        sel = np.zeros((nx, nz))
+        sel[np.arange(nz), np.arange(nz)] = 1.0
+        sel = ca.DM(sp.csc_matrix(sel))
+        a_sup = ms * self.kz
+        A_u = A - ca.mtimes(sel, ca.mtimes(ca.diag(a_sup), sel.T))
+        b_u = ca.mtimes(Bt, Tb) + ca.mtimes(sel, a_sup * Ts + Q * self.inv_cz)
+        h = dt / substeps
+        I = ca.DM.eye(nx)
+        D = I - (2.0 / 3.0) * h * A_u + (h * h / 6.0) * ca.mtimes(A_u, A_u)
+        N = I + (h / 3.0) * A_u
+        c = h * (b_u - (h / 6.0) * ca.mtimes(A_u, b_u))
+        xk = x
+        for _ in range(substeps):
+            xk = ca.solve(D, ca.mtimes(N, xk) + c)
+        F = ca.Function(f"F{substeps}", [x, u, p, dt], [xk], ["x", "u", "p", "dt"], ["x_next"])
+        self._F[substeps] = F
+        return F
+
+
+class ThermalModel:
+    """A thermal network with parameter values: simulate, linearize, export.
+
+    Parameters
+    ----------
+    network : ThermalNetwork
+    rbar_v : float or array_like
+        Convection resistance per unit distance [K/(W m)]; one value shared by all
+        convection edges (the paper) or one per edge.
+    c_v : float or array_like
+        Convection capacitance [J/K]; shared or per edge.
+
+    Examples
+    --------
+    >>> model = ThermalModel(net, rbar_v=3.36e-4, c_v=1.19e3)   # doctest: +SKIP
+    >>> sys = model.to_statespace(model.operating_point(ms=0.1, Ts=14, T=5))  # doctest: +SKIP
+    """
+
+    def __init__(self, network: ThermalNetwork, rbar_v=RBAR_V_PAPER, c_v=C_V_PAPER):
+        self.network = network
+        self.rbar_v = rbar_v
+        self.c_v = c_v
+        self._sym = None
+
+    # ---- parameters --------------------------------------------------------
+    def expand(self, rbar_v, c_v) -> np.ndarray:
+        """Per-edge parameter vector ``p`` (length ``2m``) from shared or per-edge values."""
+        m = len(self.network.convection_edges)
+        out = []
+        for name, v, unit in (("rbar_v", rbar_v, "[K/(W m)]"), ("c_v", c_v, "[J/K]")):
+            v = np.broadcast_to(np.asarray(v, dtype=float), (m,)) if np.ndim(v) == 0 \
+                else np.asarray(v, dtype=float)
+            if v.shape != (m,):
+                raise ModelError(f"{name}: expected a scalar or {m} values (one per convection "
+                                 f"edge), found shape {v.shape}")
+            if m and (not np.all(np.isfinite(v)) or np.any(v <= 0)):
+                raise ModelError(f"{name} must be finite and > 0 {unit}, found {v.tolist()}")
+            out.append(v)
+        return np.concatenate(out)
+
+    @property
+    def p(self) -> np.ndarray:
+        return self.expand(self.rbar_v, self.c_v)
+
+    @property
+    def sym(self) -> _Symbolic:
+        if self._sym is None:
+            self._sym = _Symbolic(self.network)
+        return self._sym
+
+    # ---- numeric matrices --------------------------------------------------
+    def matrices(self, p=None):
+        """Linear part of the dynamics at parameters ``p``.
+
+        Returns
+        -------
+        A : scipy.sparse.csc_matrix, shape (n_states, n_states)
+            State matrix without the supply term [1/s].
+        Bt : scipy.sparse.csc_matrix, shape (n_states, n_boundary)
+            Boundary-temperature input matrix [1/s].
+        """
+        p = self.p if p is None else np.asarray(p, dtype=float)
+        A, Bt = self.sym.AB(p)
+        return sp.csc_matrix(A.sparse()), sp.csc_matrix(Bt.sparse())
+
+    def affine(self, u, p=None, mats=None):
+        """State matrix and constant term for a constant input ``u``: ``xdot = A_u x + b_u``."""
+        A, Bt = self.matrices(p) if mats is None else mats
+        net = self.network
+        sl = net.input_slices()
+        nz = net.n_zones
+        u = np.asarray(u, dtype=float)
+        a_sup = u[sl["ms"]] * self.sym.kz
+        diag = np.zeros(net.n_states)
+        diag[:nz] = a_sup
+        A_u = A - sp.diags(diag)
+        b_u = Bt @ u[sl["T"]]
+        b_u[:nz] += a_sup * u[sl["Ts"]] + u[sl["Q"]] * self.sym.inv_cz
+        return sp.csc_matrix(A_u), b_u
+
+    def capacitances(self, p=None) -> np.ndarray:
+        """Capacitance of every state [J/K]."""
+        p = self.p if p is None else p
+        return np.asarray(self.sym.cap(p)).ravel()
+
+    # ---- simulation --------------------------------------------------------
+    def simulate(self, U, dt: float, x0, p=None, method: str = "exact", substeps: int | None = None):
+        """Simulate with inputs held constant over each step (zero-order hold).
+
+        Parameters
+        ----------
+        U : array_like, shape (N, n_inputs)
+            Input of each interval, in :attr:`ThermalNetwork.input_names` order.
+        dt : float
+            Step [s].
+        x0 : array_like, shape (n_states,)
+            Initial state [°C].
+        p : array_like, optional
+            Per-edge parameter vector (default: the model's).
+        method : {"exact", "radau", "cvodes"}
+            ``exact``: matrix exponential, cached per distinct supply-flow vector
+            (exact for ZOH inputs, insensitive to stiffness). ``radau``: L-stable
+            3rd-order rational step with ``substeps`` sub-steps (sparse for large
+            networks). ``cvodes``: CasADi's BDF integrator (an independent reference).
+        substeps : int, optional
+            For ``radau``: default ``ceil(dt / 60 s)``.
+
+        Returns
+        -------
+        X : ndarray, shape (N + 1, n_states)
+        """
+        U = np.atleast_2d(np.asarray(U, dtype=float))
+        net = self.network
+        if U.shape[1] != net.n_inputs:
+            raise ModelError(f"U: expected {net.n_inputs} input columns ({net.input_names}), "
+                             f"found {U.shape[1]}")
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape != (net.n_states,):
+            raise ModelError(f"x0: expected shape ({net.n_states},), found {x0.shape}")
+        if not dt > 0:
+            raise ModelError(f"dt must be > 0 [s], found {dt}")
+        p = self.p if p is None else np.asarray(p, dtype=float)
+        X = np.empty((U.shape[0] + 1, net.n_states))
+        X[0] = x0
+        if method == "cvodes":
+            return self._simulate_cvodes(U, dt, X, p)
+        if method not in ("exact", "radau"):
+            raise ModelError(f"method must be 'exact', 'radau' or 'cvodes', found {method!r}")
+        mats = self.matrices(p)
+        sl = net.input_slices()
+        flows, inverse = np.unique(U[:, sl["ms"]], axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        if substeps is None:
+            substeps = max(1, math.ceil(dt / 60.0))
+        steppers = {}
+        for k in range(U.shape[0]):
+            j = inverse[k]
+            A_u, b = self.affine(U[k], mats=mats)
+            if j not in steppers:
+                steppers[j] = (_exact_stepper(A_u, dt) if method == "exact"
+                               else _radau_stepper(A_u, dt, substeps))
+            X[k + 1] = steppers[j](X[k], b)
+        return X
+
+    def _simulate_cvodes(self, U, dt, X, p):
+        sym = self.sym
+        dae = {"x": sym.x, "p": ca.vertcat(sym.u, sym.p), "ode": sym.f(sym.x, sym.u, sym.p)}
+        integ = ca.integrator("I", "cvodes", dae, 0.0, dt,
+                              {"abstol": 1e-10, "reltol": 1e-10, "max_num_steps": 100000})
+        for k in range(U.shape[0]):
+            X[k + 1] = np.asarray(integ(x0=X[k], p=np.concatenate([U[k], p]))["xf"]).ravel()
+        return X
+
+    def initial_state(self, T_zones, T_boundary) -> np.ndarray:
+        """Initial state from data, as in the paper (IV-A).
+
+        Measured zones at their measurement; unmeasured zones (NaN) at the mean of
+        their measured zone neighbours (of all measured zones if they have none);
+        every edge state at the mean of its two end nodes.
+
+        Parameters
+        ----------
+        T_zones : array_like, shape (n_zones,)
+            [°C], NaN where unmeasured.
+        T_boundary : array_like, shape (n_boundary,)
+            [°C].
+        """
+        net = self.network
+        Tz = np.array(T_zones, dtype=float)
+        Tb = np.asarray(T_boundary, dtype=float)
+        if Tz.shape != (net.n_zones,) or Tb.shape != (len(net.boundary),):
+            raise ModelError(f"initial_state: expected {net.n_zones} zone and "
+                             f"{len(net.boundary)} boundary temperatures, found {Tz.shape}, {Tb.shape}")
+        known = ~np.isnan(Tz)
+        if not known.any():
+            raise ModelError("initial_state: no zone temperature is known")
+        zi = {z: i for i, z in enumerate(net.zones)}
+        filled = Tz.copy()
+        for i in np.flatnonzero(~known):
+            nb = [zi[n] for n in net.neighbours(net.zones[i]) if n in zi and known[zi[n]]]
+            filled[i] = Tz[nb].mean() if nb else Tz[known].mean()
+        node_T = dict(zip(net.zones, filled))
+        node_T.update(zip(net.boundary, Tb))
+        x = list(filled)
+        for e in net.edges:
+            mid = 0.5 * (node_T[e.a] + node_T[e.b])
+            x += [mid, mid]
+        return np.array(x)
+
+    def steady_state(self, u, p=None) -> np.ndarray:
+        """Equilibrium state for a constant input ``u`` [°C]."""
+        A_u, b = self.affine(u, p)
+        try:
+            lu = spla.splu(sp.csc_matrix(A_u))
+            x = lu.solve(-b)
+        except RuntimeError:
+            x = np.full(len(b), np.nan)
+        if not np.all(np.isfinite(x)):
+            raise ModelError("no unique steady state: the network has no path to a boundary "
+                             "node or to supply air at this operating point")
+        return x
+
+    # ---- exports -----------------------------------------------------------
+    def operating_point(self, x=None, **inputs) -> "OperatingPoint":
+        """An operating point from input values (see :meth:`ThermalNetwork.input_vector`).
+
+        ``x`` defaults to the steady state for those inputs.
+        """
+        u = self.network.input_vector(**inputs)
+        x = self.steady_state(u) if x is None else np.asarray(x, dtype=float)
+        return OperatingPoint(x=x, u=u)
+
+    def jacobians(self, op: "OperatingPoint", p=None):
+        """Exact CasADi Jacobians ``(df/dx, df/du)`` at the operating point."""
+        p = self.p if p is None else p
+        A, B = self.sym.jacobians(op.x, op.u, p)
+        return np.asarray(ca.densify(A)), np.asarray(ca.densify(B))
+
+    def to_statespace(self, op: "OperatingPoint", dt: float | None = None, name: str | None = None):
+        """Linearize at ``op`` and return a named ``control.StateSpace``.
+
+        The linear model is in deviation variables around ``op``: states ``T[z]``,
+        ``x[e,1]``, ``x[e,2]``; inputs ``ms[z]``, ``Ts[z]``, ``T[b]``, ``Q[z]``;
+        outputs ``T[z]``. Continuous unless ``dt`` [s] is given, then ZOH-discretised
+        exactly (matrix exponential).
+
+        Parameters
+        ----------
+        op : OperatingPoint
+            From :meth:`operating_point`.
+        dt : float, optional
+            Sample time [s].
+        """
+        net = self.network
+        A, B = self.jacobians(op)
+        C = np.zeros((net.n_zones, net.n_states))
+        C[np.arange(net.n_zones), np.arange(net.n_zones)] = 1.0
+        D = np.zeros((net.n_zones, net.n_inputs))
+        if dt is not None:
+            if not dt > 0:
+                raise ModelError(f"dt must be > 0 [s], found {dt}")
+            Phi, Gamma = zoh(A, dt)
+            A, B = Phi, Gamma @ B
+        return ct.ss(A, B, C, D, dt=0 if dt is None else dt, states=net.state_names,
+                     inputs=net.input_names, outputs=net.output_names,
+                     name=name or net.spec.name)
+
+    def to_casadi(self, substeps: int = 5) -> CasadiModel:
+        """The symbolic model: ``f(x, u, p)`` and a stiff-stable discrete step ``F(x, u, p, dt)``.
+
+        Parameters
+        ----------
+        substeps : int
+            Sub-steps of the rational step per call of ``F``.
+        """
+        sym = self.sym
+        net = self.network
+        return CasadiModel(sym.f, sym.step(substeps), sym.x, sym.u, sym.p, net.state_names,
+                           net.input_names, sym.param_names, self.p, substeps)
+
+
+@dataclass
+class OperatingPoint:
+    """State and input around which a model is linearized.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n_states,)
+        [°C]
+    u : ndarray, shape (n_inputs,)
+        Inputs in :attr:`ThermalNetwork.input_names` order.
+    """
+
+    x: np.ndarray
+    u: np.ndarray = field(default=None)
+
+
+def _exact_stepper(A_u, dt):
+    Phi, Gamma = zoh(A_u, dt)
+    return lambda x, b: Phi @ x + Gamma @ b
+
+
+def _radau_stepper(A_u, dt, substeps):
+    # Radau IIA = Padé(1,2) of exp: x+ = D^{-1}[(I + hA/3) x + h(I - hA/6) b],
+    # D = I - 2hA/3 + h²A²/6. L-stable, keeps the steady state exactly.
+    h = dt / substeps
+    n = A_u.shape[0]
+    I = sp.identity(n, format="csc")
+    D = sp.csc_matrix(I - (2 * h / 3) * A_u + (h * h / 6) * (A_u @ A_u))
+    N = sp.csr_matrix(I + (h / 3) * A_u)
+    A_csr = sp.csr_matrix(A_u)
+    if n > _DENSE_LIMIT:
+        solve = spla.splu(D).solve
+    else:
+        lu = sla.lu_factor(D.toarray())
+        solve = lambda r: sla.lu_solve(lu, r)  # noqa: E731
+
+    def step(x, b):
+        c = h * (b - (h / 6) * (A_csr @ b))
+        for _ in range(substeps):
+            x = solve(N @ x + c)
+        return x
+
+    return step

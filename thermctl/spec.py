@@ -1,0 +1,441 @@
+"""Building spec: YAML/JSON → validated dataclasses.
+
+The format (see ``docs/model.md``)::
+
+    name: pugh-hall-2f
+    capacity_multiplier: 5          # optional: zone C = multiplier · rho · cp · volume
+    zones:      {r240: {volume: 60}, hallway: {volume: 150, measured: false}}
+    boundary:   [outside, r200]
+    walls:      [{between: [r240, r241], R: [r1, r2, r3], C: [c1, c2], area: 14.2}]
+    distances:  [{between: [r240, r243], d: 9.0}]    # air path lengths [m]
+
+A wall gives either ``R``/``C`` (3R2C values [K/W], [J/K]) or ``area``,
+``u_value`` [W/(m² K)] and ``heat_capacity`` [J/(m² K)], which get the
+homogeneous-slab split of :func:`thermctl.rc.homogeneous_split`. Several walls
+may join the same two nodes (a wall and a window, say): they stay separate edges.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import networkx as nx
+import yaml
+
+from . import rc
+from .errors import SpecError, SpecWarning
+
+__all__ = [
+    "Zone", "Wall", "Distance", "BuildingSpec", "load_spec", "spec_from_dict",
+    "RHO_AIR", "cp_moist_air",
+]
+
+RHO_AIR = 1.2
+"""Air density [kg/m³] used for zone capacitance and volumetric flow."""
+
+W_S_DEFAULT = 0.0074
+"""Supply-air humidity ratio [kg/kg] measured on site by Goyal et al."""
+
+
+def cp_moist_air(w_s: float = W_S_DEFAULT) -> float:
+    """Specific heat of moist air, ``1006 + 1860·w_s`` [J/(kg K)]."""
+    return 1006.0 + 1860.0 * w_s
+
+
+_TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances"}
+_ZONE_KEYS = {"volume", "measured", "capacitance"}
+_WALL_KEYS = {"between", "R", "C", "area", "u_value", "heat_capacity", "name"}
+_DIST_KEYS = {"between", "d"}
+
+
+@dataclass(frozen=True)
+class Zone:
+    """A well-mixed air volume whose temperature is a state.
+
+    Attributes
+    ----------
+    name : str
+    volume : float
+        Air volume [m³].
+    measured : bool
+        Whether its temperature is in the data (a hallway often is not).
+    capacitance : float or None
+        Heat capacity [J/K]; ``None`` means ``capacity_multiplier·ρ·cp·volume``.
+    """
+
+    name: str
+    volume: float
+    measured: bool = True
+    capacitance: float | None = None
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A conduction path (wall, floor, window, door leaf) modelled as 3R2C.
+
+    Attributes
+    ----------
+    a, b : str
+        End nodes (zone or boundary).
+    R : tuple of 3 float
+        [K/W]
+    C : tuple of 2 float
+        [J/K]
+    area : float or None
+        [m²], informative.
+    name : str or None
+    """
+
+    a: str
+    b: str
+    R: tuple[float, float, float]
+    C: tuple[float, float]
+    area: float | None = None
+    name: str | None = None
+
+    @property
+    def alpha(self) -> float:
+        """alpha of this wall's 3R2C element [-] (see :func:`thermctl.rc.alpha`)."""
+        return rc.alpha(self.R, self.C)
+
+
+@dataclass(frozen=True)
+class Distance:
+    """Length of the most likely air path between two zones [m]."""
+
+    a: str
+    b: str
+    d: float
+
+
+@dataclass(frozen=True)
+class BuildingSpec:
+    """A validated building spec. Build with :func:`load_spec` or :func:`spec_from_dict`."""
+
+    name: str
+    zones: tuple[Zone, ...]
+    boundary: tuple[str, ...]
+    walls: tuple[Wall, ...]
+    distances: tuple[Distance, ...] = ()
+    capacity_multiplier: float = 1.0
+    w_s: float = W_S_DEFAULT
+    source: str = field(default="<dict>", compare=False)
+
+    @property
+    def zone_names(self) -> list[str]:
+        return [z.name for z in self.zones]
+
+    @property
+    def measured_zones(self) -> list[str]:
+        return [z.name for z in self.zones if z.measured]
+
+    @property
+    def cp(self) -> float:
+        """Specific heat of the supply air [J/(kg K)]."""
+        return cp_moist_air(self.w_s)
+
+    def zone(self, name: str) -> Zone:
+        for z in self.zones:
+            if z.name == name:
+                return z
+        raise SpecError(f"{self.source}: no zone named {name!r}; zones are {self.zone_names}")
+
+    def zone_capacitance(self, name: str) -> float:
+        """Heat capacity of a zone [J/K]."""
+        z = self.zone(name)
+        if z.capacitance is not None:
+            return z.capacitance
+        return self.capacity_multiplier * RHO_AIR * self.cp * z.volume
+
+    def distance(self, a: str, b: str) -> float | None:
+        """Air path length between two zones [m], or None if the spec gives none."""
+        for dist in self.distances:
+            if {dist.a, dist.b} == {a, b}:
+                return dist.d
+        return None
+
+    def alphas(self) -> dict[str, float]:
+        """alpha of every wall, keyed by wall label."""
+        return {_wall_label(w, i): w.alpha for i, w in enumerate(self.walls)}
+
+    def alpha(self) -> float:
+        """The alpha used for the convection bounds: the median over the walls [-]."""
+        vals = sorted(self.alphas().values())
+        if not vals:
+            raise SpecError(f"{self.source}: no walls, cannot compute alpha")
+        n = len(vals)
+        return vals[n // 2] if n % 2 else 0.5 * (vals[n // 2 - 1] + vals[n // 2])
+
+    def to_dict(self) -> dict:
+        """Plain dict in the spec file format (R/C form for every wall)."""
+        zones = {}
+        for z in self.zones:
+            entry = {"volume": z.volume}
+            if not z.measured:
+                entry["measured"] = False
+            if z.capacitance is not None:
+                entry["capacitance"] = z.capacitance
+            zones[z.name] = entry
+        walls = []
+        for w in self.walls:
+            entry = {"between": [w.a, w.b], "R": list(w.R), "C": list(w.C)}
+            if w.area is not None:
+                entry["area"] = w.area
+            if w.name is not None:
+                entry["name"] = w.name
+            walls.append(entry)
+        return {
+            "name": self.name,
+            "capacity_multiplier": self.capacity_multiplier,
+            "w_s": self.w_s,
+            "zones": zones,
+            "boundary": list(self.boundary),
+            "walls": walls,
+            "distances": [{"between": [d.a, d.b], "d": d.d} for d in self.distances],
+        }
+
+    def dump(self, path) -> None:
+        """Write the spec as YAML (``.yaml``/``.yml``) or JSON (any other suffix)."""
+        path = Path(path)
+        data = self.to_dict()
+        if path.suffix.lower() in (".yaml", ".yml"):
+            path.write_text(yaml.safe_dump(data, sort_keys=False))
+        else:
+            path.write_text(json.dumps(data, indent=2))
+
+
+def _wall_label(w: Wall, i: int) -> str:
+    return w.name if w.name else f"walls[{i}] {w.a}-{w.b}"
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML loader that refuses duplicate mapping keys (a silent override in plain YAML)."""
+
+
+def _construct_mapping(loader, node, deep=False):
+    seen = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise SpecError(f"duplicate key {key!r} at line {key_node.start_mark.line + 1}")
+        seen.add(key)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def load_spec(path) -> BuildingSpec:
+    """Load and validate a building spec from a YAML or JSON file.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.yaml``, ``.yml`` or ``.json`` file.
+
+    Returns
+    -------
+    BuildingSpec
+
+    Raises
+    ------
+    SpecError
+        If the file is missing, unreadable or invalid; the message names the file and entry.
+
+    Examples
+    --------
+    >>> spec = load_spec("building.yaml")  # doctest: +SKIP
+    >>> spec.zone_names  # doctest: +SKIP
+    ['r240', 'r241', 'hallway']
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError(f"{path}: building spec not found")
+    text = path.read_text()
+    if not text.strip():
+        raise SpecError(f"{path}: building spec is empty")
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(text, object_pairs_hook=_json_unique)
+        else:
+            data = yaml.load(text, Loader=_UniqueKeyLoader)
+    except SpecError as exc:
+        raise SpecError(f"{path}: {exc}") from None
+    except (yaml.YAMLError, json.JSONDecodeError) as exc:
+        raise SpecError(f"{path}: not valid {'JSON' if path.suffix == '.json' else 'YAML'}: {exc}") from None
+    return spec_from_dict(data, source=str(path))
+
+
+def _json_unique(pairs):
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise SpecError(f"duplicate key {k!r}")
+        out[k] = v
+    return out
+
+
+def _positive(value, where, unit):
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise SpecError(f"{where}: expected a number {unit}, found {value!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise SpecError(f"{where}: must be finite and > 0 {unit}, found {value!r}")
+    return v
+
+
+def _check_keys(entry, allowed, where):
+    if not isinstance(entry, dict):
+        raise SpecError(f"{where}: expected a mapping, found {type(entry).__name__}")
+    unknown = sorted(set(entry) - allowed)
+    if unknown:
+        raise SpecError(f"{where}: unknown key(s) {unknown}; allowed keys are {sorted(allowed)}")
+
+
+def _pair(entry, where, nodes):
+    pair = entry.get("between")
+    if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+        raise SpecError(f"{where}: 'between' must list exactly 2 nodes, found {pair!r}")
+    a, b = (str(p) for p in pair)
+    if a == b:
+        raise SpecError(f"{where}: 'between' names node {a!r} twice")
+    for n in (a, b):
+        if n not in nodes:
+            raise SpecError(f"{where}: unknown node {n!r}; known nodes are {sorted(nodes)}")
+    return a, b
+
+
+def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
+    """Validate a spec given as a dict (the parsed file). See :func:`load_spec`."""
+    src = source
+    _check_keys(data, _TOP_KEYS, src)
+    for key in ("zones", "boundary", "walls"):
+        if key not in data:
+            raise SpecError(f"{src}: missing required key {key!r}")
+    name = str(data.get("name", Path(source).stem if source != "<dict>" else "building"))
+    mult = _positive(data.get("capacity_multiplier", 1.0), f"{src}: capacity_multiplier", "[-]")
+    w_s = float(data.get("w_s", W_S_DEFAULT))
+    if not (0 <= w_s < 0.1):
+        raise SpecError(f"{src}: w_s must be a humidity ratio in [0, 0.1) [kg/kg], found {w_s}")
+
+    raw_zones = data["zones"]
+    if not isinstance(raw_zones, dict) or not raw_zones:
+        raise SpecError(f"{src}: 'zones' must be a non-empty mapping of zone name → {{volume: ...}}")
+    zones = []
+    for zname, entry in raw_zones.items():
+        where = f"{src}: zones.{zname}"
+        entry = {} if entry is None else entry
+        _check_keys(entry, _ZONE_KEYS, where)
+        if "volume" not in entry:
+            raise SpecError(f"{where}: missing 'volume' [m³]")
+        vol = _positive(entry["volume"], f"{where}.volume", "[m³]")
+        cap = entry.get("capacitance")
+        cap = None if cap is None else _positive(cap, f"{where}.capacitance", "[J/K]")
+        measured = entry.get("measured", True)
+        if not isinstance(measured, bool):
+            raise SpecError(f"{where}.measured: expected true or false, found {measured!r}")
+        zones.append(Zone(str(zname), vol, measured, cap))
+
+    boundary = data["boundary"] or []
+    if not isinstance(boundary, (list, tuple)):
+        raise SpecError(f"{src}: 'boundary' must be a list of node names, found {boundary!r}")
+    boundary = [str(b) for b in boundary]
+    seen = set()
+    for b in boundary:
+        if b in seen:
+            raise SpecError(f"{src}: boundary node {b!r} is listed twice")
+        seen.add(b)
+    clash = sorted(set(boundary) & {z.name for z in zones})
+    if clash:
+        raise SpecError(f"{src}: {clash} named both as zone and as boundary node")
+    nodes = {z.name for z in zones} | set(boundary)
+
+    walls = []
+    raw_walls = data["walls"] or []
+    if not isinstance(raw_walls, list):
+        raise SpecError(f"{src}: 'walls' must be a list")
+    wall_names = set()
+    for i, entry in enumerate(raw_walls):
+        where = f"{src}: walls[{i}]"
+        _check_keys(entry, _WALL_KEYS, where)
+        a, b = _pair(entry, where, nodes)
+        if a in boundary and b in boundary:
+            raise SpecError(f"{where}: joins two boundary nodes {a!r} and {b!r}; it affects no zone")
+        has_rc = "R" in entry or "C" in entry
+        has_u = any(k in entry for k in ("u_value", "heat_capacity"))
+        if has_rc and has_u:
+            raise SpecError(f"{where}: give either R/C or area/u_value/heat_capacity, not both")
+        area = entry.get("area")
+        area = None if area is None else _positive(area, f"{where}.area", "[m²]")
+        if has_u:
+            for k in ("area", "u_value", "heat_capacity"):
+                if k not in entry:
+                    raise SpecError(f"{where}: missing {k!r} (needed with u_value/heat_capacity)")
+            u = _positive(entry["u_value"], f"{where}.u_value", "[W/(m² K)]")
+            hc = _positive(entry["heat_capacity"], f"{where}.heat_capacity", "[J/(m² K)]")
+            R, C = rc.from_u_value(area, u, hc)
+        else:
+            R, C = entry.get("R"), entry.get("C")
+            if R is None or C is None:
+                raise SpecError(f"{where}: needs R (3 values [K/W]) and C (2 values [J/K]), "
+                                "or area/u_value/heat_capacity")
+            if not isinstance(R, (list, tuple)) or len(R) != 3:
+                raise SpecError(f"{where}.R: expected a list of 3 resistances [K/W], found {R!r}")
+            if not isinstance(C, (list, tuple)) or len(C) != 2:
+                raise SpecError(f"{where}.C: expected a list of 2 capacitances [J/K], found {C!r}")
+            R = tuple(_positive(r, f"{where}.R[{k}]", "[K/W]") for k, r in enumerate(R))
+            C = tuple(_positive(c, f"{where}.C[{k}]", "[J/K]") for k, c in enumerate(C))
+        wname = entry.get("name")
+        if wname is not None:
+            wname = str(wname)
+            if wname in wall_names:
+                raise SpecError(f"{where}: duplicate wall name {wname!r}")
+            wall_names.add(wname)
+        walls.append(Wall(a, b, R, C, area, wname))
+
+    distances = []
+    raw_d = data.get("distances") or []
+    if not isinstance(raw_d, list):
+        raise SpecError(f"{src}: 'distances' must be a list")
+    zone_set = {z.name for z in zones}
+    seen_pairs = set()
+    for i, entry in enumerate(raw_d):
+        where = f"{src}: distances[{i}]"
+        _check_keys(entry, _DIST_KEYS, where)
+        a, b = _pair(entry, where, nodes)
+        for n in (a, b):
+            if n not in zone_set:
+                raise SpecError(f"{where}: {n!r} is a boundary node; air paths join zones")
+        if "d" not in entry:
+            raise SpecError(f"{where}: missing 'd' [m]")
+        d = _positive(entry["d"], f"{where}.d", "[m]")
+        key = frozenset((a, b))
+        if key in seen_pairs:
+            raise SpecError(f"{where}: distance between {a!r} and {b!r} given twice")
+        seen_pairs.add(key)
+        distances.append(Distance(a, b, d))
+
+    spec = BuildingSpec(name, tuple(zones), tuple(boundary), tuple(walls), tuple(distances),
+                        mult, w_s, source)
+    _warn_isolated(spec)
+    return spec
+
+
+def _warn_isolated(spec: BuildingSpec) -> None:
+    g = nx.Graph()
+    g.add_nodes_from(spec.zone_names)
+    g.add_nodes_from(spec.boundary)
+    g.add_edges_from((w.a, w.b) for w in spec.walls)
+    reach = set()
+    for b in spec.boundary:
+        reach |= nx.node_connected_component(g, b)
+    lonely = [z for z in spec.zone_names if z not in reach]
+    if lonely:
+        warnings.warn(f"{spec.source}: zone(s) {lonely} have no wall path to any boundary node; "
+                      "their temperature is set by supply air and heat gains alone",
+                      SpecWarning, stacklevel=3)
