@@ -32,7 +32,7 @@ import scipy.sparse.linalg as spla
 from .errors import ModelError
 from .network import ThermalNetwork
 
-__all__ = ["ThermalModel", "CasadiModel", "zoh", "RBAR_V_PAPER", "C_V_PAPER"]
+__all__ = ["ThermalModel", "CasadiModel", "OperatingPoint", "zoh", "make_stepper", "RBAR_V_PAPER", "C_V_PAPER"]
 
 RBAR_V_PAPER = 3.36e-4
 """Convection resistance per unit distance identified by Goyal et al. [K/(W m)]."""
@@ -324,8 +324,7 @@ class ThermalModel:
             j = inverse[k]
             A_u, b = self.affine(U[k], mats=mats)
             if j not in steppers:
-                steppers[j] = (_exact_stepper(A_u, dt) if method == "exact"
-                               else _radau_stepper(A_u, dt, substeps))
+                steppers[j] = make_stepper(A_u, dt, method, substeps)
             X[k + 1] = steppers[j](X[k], b)
         return X
 
@@ -462,9 +461,28 @@ class OperatingPoint:
     u: np.ndarray = field(default=None)
 
 
-def _exact_stepper(A_u, dt):
-    Phi, Gamma = zoh(A_u, dt)
-    return lambda x, b: Phi @ x + Gamma @ b
+def make_stepper(A_u, dt: float, method: str = "exact", substeps: int = 1):
+    """A function ``step(x, b) -> x_next`` for ``xdot = A_u x + b`` with ``b`` held over ``dt``.
+
+    Parameters
+    ----------
+    A_u : sparse or dense matrix, shape (n, n)
+        State matrix at the current supply flow [1/s] (see :meth:`ThermalModel.affine`).
+    dt : float
+        Step [s].
+    method : {"exact", "radau"}
+        ``exact``: matrix exponential (dense, O(n³) once per call of this function).
+        ``radau``: L-stable 3rd-order rational step over ``substeps`` sub-steps; sparse
+        LU above 400 states, so it scales to large buildings.
+    substeps : int
+        Sub-steps for ``radau``.
+    """
+    if method == "exact":
+        Phi, Gamma = zoh(A_u, dt)
+        return lambda x, b: Phi @ x + Gamma @ b
+    if method != "radau":
+        raise ModelError(f"method must be 'exact' or 'radau', found {method!r}")
+    return _radau_stepper(sp.csc_matrix(A_u), dt, substeps)
 
 
 def _radau_stepper(A_u, dt, substeps):
