@@ -196,6 +196,8 @@ class ThermalModel:
         convection edges (the paper) or one per edge.
     c_v : float or array_like
         Convection capacitance [J/K]; shared or per edge.
+    meta : dict, optional
+        Provenance carried into ``model.json`` (scores, data range, metrics...).
 
     Examples
     --------
@@ -203,10 +205,12 @@ class ThermalModel:
     >>> sys = model.to_statespace(model.operating_point(ms=0.1, Ts=14, T=5))  # doctest: +SKIP
     """
 
-    def __init__(self, network: ThermalNetwork, rbar_v=RBAR_V_PAPER, c_v=C_V_PAPER):
+    def __init__(self, network: ThermalNetwork, rbar_v=RBAR_V_PAPER, c_v=C_V_PAPER,
+                 meta: dict | None = None):
         self.network = network
         self.rbar_v = rbar_v
         self.c_v = c_v
+        self.meta = {} if meta is None else meta
         self._sym = None
 
     # ---- parameters --------------------------------------------------------

@@ -1,0 +1,130 @@
+"""The model file ``model.json``: save and load an identified model exactly.
+
+Layout (``format: thermctl-model``, ``version: 1``)::
+
+    {
+      "format": "thermctl-model", "version": 1, "thermctl": "0.1.0",
+      "spec": {...},                      # the building spec, R/C form
+      "convection": [{"a": .., "b": .., "d": .., "score": ..}, ...],
+      "parameters": {"rbar_v": float | [per edge], "c_v": float | [per edge]},
+      "alpha": 9.8696,
+      "units": {"temperature": "degC", "rbar_v": "K/(W m)", "c_v": "J/K", ...},
+      "meta": {...}                       # data range, fit diagnostics, metrics
+    }
+
+Floats are written with ``repr`` precision by the JSON encoder, so a load/save
+round trip is exact.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import ModelError, SpecError
+from .model import ThermalModel
+from .network import ThermalNetwork
+from .spec import spec_from_dict
+
+__all__ = ["save_model", "load_model", "model_to_dict", "model_from_dict", "atomic_write_text"]
+
+FORMAT = "thermctl-model"
+VERSION = 1
+UNITS = {"temperature": "degC", "rbar_v": "K/(W m)", "c_v": "J/K", "d": "m",
+         "R": "K/W", "C": "J/K", "ms": "kg/s", "Q": "W", "time": "s"}
+
+
+def _plain(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    return v
+
+
+def model_to_dict(model: ThermalModel) -> dict:
+    """The ``model.json`` content of a model, as plain data."""
+    net = model.network
+    scores = model.meta.get("edge_scores", {})
+    conv = [{"a": e.a, "b": e.b, "d": e.d, **({"score": scores[e.name]} if e.name in scores else {})}
+            for e in net.convection_edges]
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "thermctl": __version__,
+        "spec": net.spec.to_dict(),
+        "convection": conv,
+        "parameters": {"rbar_v": _plain(model.rbar_v), "c_v": _plain(model.c_v)},
+        "alpha": net.spec.alpha() if net.spec.walls else None,
+        "units": UNITS,
+        "meta": json.loads(json.dumps(model.meta, default=_plain)),
+    }
+
+
+def model_from_dict(data: dict, source: str = "<dict>") -> ThermalModel:
+    """Inverse of :func:`model_to_dict`."""
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise ModelError(f"{source}: not a thermctl model file (missing 'format: {FORMAT}')")
+    if data.get("version") != VERSION:
+        raise ModelError(f"{source}: model file version {data.get('version')!r}, "
+                         f"this thermctl reads version {VERSION}")
+    try:
+        spec = spec_from_dict(data["spec"], source=f"{source}:spec")
+        conv = [(c["a"], c["b"], c["d"]) for c in data["convection"]]
+        net = ThermalNetwork(spec, conv)
+        par = data["parameters"]
+        model = ThermalModel(net, rbar_v=par["rbar_v"], c_v=par["c_v"], meta=data.get("meta", {}))
+        model.p  # validates the parameter shapes and values
+    except KeyError as exc:
+        raise ModelError(f"{source}: model file lacks the entry {exc}") from None
+    except SpecError as exc:
+        raise ModelError(f"{source}: invalid spec inside the model file: {exc}") from None
+    return model
+
+
+def atomic_write_text(path, text: str) -> None:
+    """Write a file completely or not at all (temporary file + rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_model(model: ThermalModel, path) -> None:
+    """Write ``model.json`` (atomically).
+
+    Parameters
+    ----------
+    model : ThermalModel
+    path : str or Path
+    """
+    atomic_write_text(path, json.dumps(model_to_dict(model), indent=2))
+
+
+def load_model(path) -> ThermalModel:
+    """Load a model saved by :func:`save_model`; the round trip is exact.
+
+    Examples
+    --------
+    >>> model = load_model("out/model.json")       # doctest: +SKIP
+    >>> sys = model.to_statespace(model.operating_point(ms=0.05, Ts=14, T=5))  # doctest: +SKIP
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"{path}: model file not found")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ModelError(f"{path}: not valid JSON: {exc}") from None
+    return model_from_dict(data, source=str(path))

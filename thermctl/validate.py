@@ -1,0 +1,145 @@
+"""Validation measures: open-loop prediction and the step-response matrix.
+
+On closed-loop data the zones sit near their set points and unmeasured gains
+dominate the error, so a 48-h open-loop simulation barely separates models
+(DESIGN.md, "Validation: measures that tell"). What an MPC acts through is the
+response of every zone temperature to heat put into each zone: the step-response
+matrix. Both are computed here for any :class:`~thermctl.model.ThermalModel`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ModelError
+from .model import ThermalModel, zoh
+
+__all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "relative_error",
+           "minimum_flows"]
+
+
+@dataclass
+class OpenLoopResult:
+    """Open-loop simulation of a model against measured zone temperatures.
+
+    Attributes
+    ----------
+    zones : list of str
+        Measured zones compared.
+    predicted, measured : ndarray, shape (N + 1, n)
+        [°C]
+    rmse, max_abs : dict
+        Per zone [K].
+    """
+
+    zones: list
+    predicted: np.ndarray
+    measured: np.ndarray
+    rmse: dict = field(default_factory=dict)
+    max_abs: dict = field(default_factory=dict)
+
+    @property
+    def rmse_mean(self) -> float:
+        return float(np.mean(list(self.rmse.values())))
+
+
+def open_loop(model: ThermalModel, U, Y, dt: float, T_boundary0, zones=None,
+              method: str = "exact") -> OpenLoopResult:
+    """Simulate from the first sample with measured inputs and compare (paper IV-C).
+
+    Parameters
+    ----------
+    model : ThermalModel
+    U : array_like, shape (N, n_inputs)
+        Inputs held over each step.
+    Y : array_like, shape (N + 1, n_zones)
+        Measured zone temperatures [°C] in network zone order, NaN where unmeasured.
+    dt : float
+        Step [s].
+    T_boundary0 : array_like, shape (n_boundary,)
+        Boundary temperatures at the first sample [°C] (for the edge initial states).
+    zones : list of str, optional
+        Zones to score (default: those with data).
+    """
+    net = model.network
+    Y = np.asarray(Y, dtype=float)
+    if Y.shape[1] != net.n_zones:
+        raise ModelError(f"Y: expected {net.n_zones} zone columns ({net.zones}), found {Y.shape[1]}")
+    x0 = model.initial_state(Y[0], T_boundary0)
+    X = model.simulate(U, dt, x0, method=method)
+    zones = [z for z in net.zones if not np.all(np.isnan(Y[:, net.zones.index(z)]))] \
+        if zones is None else list(zones)
+    idx = [net.zones.index(z) for z in zones]
+    pred, meas = X[:, idx], Y[:, idx]
+    err = pred - meas
+    res = OpenLoopResult(zones, pred, meas)
+    for k, z in enumerate(zones):
+        e = err[:, k][~np.isnan(err[:, k])]
+        res.rmse[z] = float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+        res.max_abs[z] = float(np.max(np.abs(e))) if e.size else float("nan")
+    return res
+
+
+def minimum_flows(ms, quantile: float = 0.05) -> np.ndarray:
+    """Per-zone minimum supply flow [kg/s]: a low quantile of the positive flows.
+
+    Parameters
+    ----------
+    ms : array_like, shape (N, n_zones)
+        Supply mass flow [kg/s].
+    quantile : float
+        Quantile of the positive flows taken as "minimum" (robust to glitches).
+    """
+    ms = np.asarray(ms, dtype=float)
+    out = np.zeros(ms.shape[1])
+    for j in range(ms.shape[1]):
+        pos = ms[:, j][ms[:, j] > 1e-6]
+        out[j] = np.quantile(pos, quantile) if pos.size else 0.0
+    return out
+
+
+def step_response_matrix(model: ThermalModel, ms, horizons_h=(1.0, 6.0, 24.0),
+                         power: float = 100.0) -> np.ndarray:
+    r"""Step responses from heat into each zone to every zone temperature.
+
+    With the supply flow fixed the model is linear in the heat inputs, so
+    :math:`G(t) = \Gamma(t) B_Q \cdot P` with :math:`\Gamma(t) = \int_0^t e^{A s} ds`,
+    computed exactly by the matrix exponential.
+
+    Parameters
+    ----------
+    model : ThermalModel
+    ms : array_like, shape (n_zones,)
+        Supply flow held during the step [kg/s] (e.g. :func:`minimum_flows`).
+    horizons_h : sequence of float
+        Times after the step [h].
+    power : float
+        Step size [W].
+
+    Returns
+    -------
+    ndarray, shape (len(horizons_h), n_zones, n_zones)
+        ``G[h, j, i]``: temperature rise of zone ``j`` [K] at horizon ``h`` after
+        ``power`` W is switched on in zone ``i``.
+    """
+    net = model.network
+    u = net.input_vector(ms=dict(zip(net.zones, np.asarray(ms, dtype=float))))
+    A_u, _ = model.affine(u)
+    nz = net.n_zones
+    BQ = np.zeros((net.n_states, nz))
+    BQ[np.arange(nz), np.arange(nz)] = model.sym.inv_cz
+    out = np.empty((len(horizons_h), nz, nz))
+    for h, t in enumerate(horizons_h):
+        _, Gamma = zoh(A_u, 3600.0 * t)
+        out[h] = (Gamma @ BQ)[:nz] * power
+    return out
+
+
+def relative_error(G, G_ref) -> np.ndarray:
+    """Relative Frobenius error per horizon, ``‖G − G_ref‖ / ‖G_ref‖`` [-]."""
+    G, G_ref = np.asarray(G), np.asarray(G_ref)
+    num = np.linalg.norm((G - G_ref).reshape(len(G), -1), axis=1)
+    den = np.linalg.norm(G_ref.reshape(len(G_ref), -1), axis=1)
+    return num / den
