@@ -128,3 +128,44 @@ def load_model(path) -> ThermalModel:
     except json.JSONDecodeError as exc:
         raise ModelError(f"{path}: not valid JSON: {exc}") from None
     return model_from_dict(data, source=str(path))
+
+
+def save_statespace(sys, path, op=None) -> None:
+    """Save a ``control.StateSpace`` as ``.npz``: ``A, B, C, D, dt`` and the signal names.
+
+    The file also holds the operating point (``x_op``, ``u_op``) when given, since the
+    linear model is in deviations from it. Load with :func:`load_statespace`.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays = dict(A=sys.A, B=sys.B, C=sys.C, D=sys.D, dt=np.float64(sys.dt or 0.0),
+                  states=np.array(sys.state_labels), inputs=np.array(sys.input_labels),
+                  outputs=np.array(sys.output_labels), name=np.array(sys.name))
+    if op is not None:
+        arrays.update(x_op=np.asarray(op.x), u_op=np.asarray(op.u))
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def load_statespace(path):
+    """Load a ``control.StateSpace`` saved by :func:`save_statespace` (names included).
+
+    Returns
+    -------
+    sys : control.StateSpace
+    op : dict
+        ``x_op``/``u_op`` arrays if the file has them, else empty.
+    """
+    import control as ct
+
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"{path}: state-space file not found")
+    with np.load(path, allow_pickle=False) as f:
+        dt = float(f["dt"])
+        sys = ct.ss(f["A"], f["B"], f["C"], f["D"], dt=dt if dt > 0 else 0,
+                    states=[str(s) for s in f["states"]], inputs=[str(s) for s in f["inputs"]],
+                    outputs=[str(s) for s in f["outputs"]], name=str(f["name"]))
+        op = {k: f[k] for k in ("x_op", "u_op") if k in f}
+    return sys, op
