@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass, field
 
 import casadi as ca
+import networkx as nx
 import control as ct
 import numpy as np
 import scipy.linalg as sla
@@ -233,6 +234,19 @@ class ThermalModel:
     def p(self) -> np.ndarray:
         return self.expand(self.rbar_v, self.c_v)
 
+    def _p(self, p) -> np.ndarray:
+        """The model's parameter vector, or ``p`` checked: shape (2m,), finite, > 0."""
+        if p is None:
+            return self.p
+        p = np.asarray(p, dtype=float)
+        names = self.sym.param_names
+        if p.shape != (len(names),):
+            raise ModelError(f"p: expected {len(names)} values {names}, found shape {p.shape}")
+        if not np.all(np.isfinite(p)) or np.any(p <= 0):
+            raise ModelError(f"p: every parameter must be finite and > 0, found {p.tolist()} "
+                             f"for {names}")
+        return p
+
     @property
     def sym(self) -> _Symbolic:
         if self._sym is None:
@@ -250,8 +264,7 @@ class ThermalModel:
         Bt : scipy.sparse.csc_matrix, shape (n_states, n_boundary)
             Boundary-temperature input matrix [1/s].
         """
-        p = self.p if p is None else np.asarray(p, dtype=float)
-        A, Bt = self.sym.AB(p)
+        A, Bt = self.sym.AB(self._p(p))
         return sp.csc_matrix(A.sparse()), sp.csc_matrix(Bt.sparse())
 
     def affine(self, u, p=None, mats=None):
@@ -271,8 +284,7 @@ class ThermalModel:
 
     def capacitances(self, p=None) -> np.ndarray:
         """Capacitance of every state [J/K]."""
-        p = self.p if p is None else p
-        return np.asarray(self.sym.cap(p)).ravel()
+        return np.asarray(self.sym.cap(self._p(p))).ravel()
 
     # ---- simulation --------------------------------------------------------
     def simulate(self, U, dt: float, x0, p=None, method: str = "exact", substeps: int | None = None):
@@ -310,7 +322,7 @@ class ThermalModel:
             raise ModelError(f"x0: expected shape ({net.n_states},), found {x0.shape}")
         if not dt > 0:
             raise ModelError(f"dt must be > 0 [s], found {dt}")
-        p = self.p if p is None else np.asarray(p, dtype=float)
+        p = self._p(p)
         X = np.empty((U.shape[0] + 1, net.n_states))
         X[0] = x0
         if method == "cvodes":
@@ -379,15 +391,19 @@ class ThermalModel:
 
     def steady_state(self, u, p=None) -> np.ndarray:
         """Equilibrium state for a constant input ``u`` [°C]."""
+        net = self.network
+        u = np.asarray(u, dtype=float)
+        # A floating part of the network (no boundary node, no supply air) makes A_u singular;
+        # LU does not reliably flag that numerically, so check the structure first.
+        fed = {z for z, m in zip(net.zones, u[net.input_slices()["ms"]]) if m > 0}
+        for comp in nx.connected_components(net.graph):
+            if not (comp & set(net.boundary)) and not (comp & fed):
+                raise ModelError(f"no unique steady state: zones {sorted(comp)} have no path to a "
+                                 "boundary node and no supply air at this operating point")
         A_u, b = self.affine(u, p)
-        try:
-            lu = spla.splu(sp.csc_matrix(A_u))
-            x = lu.solve(-b)
-        except RuntimeError:
-            x = np.full(len(b), np.nan)
+        x = spla.splu(sp.csc_matrix(A_u)).solve(-b)
         if not np.all(np.isfinite(x)):
-            raise ModelError("no unique steady state: the network has no path to a boundary "
-                             "node or to supply air at this operating point")
+            raise ModelError("no unique steady state: the linear system is singular")
         return x
 
     # ---- exports -----------------------------------------------------------
@@ -402,8 +418,7 @@ class ThermalModel:
 
     def jacobians(self, op: "OperatingPoint", p=None):
         """Exact CasADi Jacobians ``(df/dx, df/du)`` at the operating point."""
-        p = self.p if p is None else p
-        A, B = self.sym.jacobians(op.x, op.u, p)
+        A, B = self.sym.jacobians(op.x, op.u, self._p(p))
         return np.asarray(ca.densify(A)), np.asarray(ca.densify(B))
 
     def to_statespace(self, op: "OperatingPoint", dt: float | None = None, name: str | None = None):

@@ -258,15 +258,18 @@ def load_spec(path) -> BuildingSpec:
     text = path.read_text()
     if not text.strip():
         raise SpecError(f"{path}: building spec is empty")
+    is_json = path.suffix.lower() == ".json"
     try:
-        if path.suffix.lower() == ".json":
+        if is_json:
             data = json.loads(text, object_pairs_hook=_json_unique)
         else:
             data = yaml.load(text, Loader=_UniqueKeyLoader)
     except SpecError as exc:
         raise SpecError(f"{path}: {exc}") from None
     except (yaml.YAMLError, json.JSONDecodeError) as exc:
-        raise SpecError(f"{path}: not valid {'JSON' if path.suffix == '.json' else 'YAML'}: {exc}") from None
+        raise SpecError(f"{path}: not valid {'JSON' if is_json else 'YAML'}: {exc}") from None
+    if data is None:
+        raise SpecError(f"{path}: building spec is empty (only comments)")
     return spec_from_dict(data, source=str(path))
 
 
@@ -319,7 +322,11 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
             raise SpecError(f"{src}: missing required key {key!r}")
     name = str(data.get("name", Path(source).stem if source != "<dict>" else "building"))
     mult = _positive(data.get("capacity_multiplier", 1.0), f"{src}: capacity_multiplier", "[-]")
-    w_s = float(data.get("w_s", W_S_DEFAULT))
+    w_s = data.get("w_s", W_S_DEFAULT)
+    try:
+        w_s = float(w_s)
+    except (TypeError, ValueError):
+        raise SpecError(f"{src}: w_s: expected a humidity ratio [kg/kg], found {w_s!r}") from None
     if not (0 <= w_s < 0.1):
         raise SpecError(f"{src}: w_s must be a humidity ratio in [0, 0.1) [kg/kg], found {w_s}")
 
