@@ -30,6 +30,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ._blas import single_thread_blas
 from .errors import ModelError
 from .network import ThermalNetwork
 
@@ -68,7 +69,8 @@ def zoh(A, dt: float):
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n] = A * dt
     M[:n, n:] = np.eye(n) * dt
-    E = sla.expm(M)
+    with single_thread_blas():
+        E = sla.expm(M)
     return E[:n, :n], E[:n, n:]
 
 
@@ -104,6 +106,17 @@ class CasadiModel:
     substeps: int
 
 
+def _triplet(terms: dict, n: int, m: int) -> ca.SX:
+    """Sparse SX matrix from ``{(row, col): [terms to add]}``."""
+    if not terms:
+        return ca.SX(n, m)
+    keys = sorted(terms, key=lambda rc: (rc[1], rc[0]))
+    rows = [r for r, _ in keys]
+    cols = [c for _, c in keys]
+    vals = ca.vertcat(*[sum(terms[k][1:], terms[k][0]) for k in keys])
+    return ca.SX.triplet(rows, cols, vals, n, m)
+
+
 class _Symbolic:
     """CasADi expressions of a network, built once per network."""
 
@@ -123,18 +136,21 @@ class _Symbolic:
         cap = [cap_fixed[i] if cse[i] < 0 else cv[int(cse[i])] for i in range(nx)]
         nb = len(net.boundary)
         sl = net.input_slices()
-        A = ca.SX(nx, nx)
-        Bt = ca.SX(nx, nb)
+        # Collect the entries first and build the sparse matrices from triplets: element
+        # assignment into an SX matrix is O(nnz) each, far too slow for 1000+ states.
+        a_terms, b_terms = {}, {}
         for (i, j), r, k in zip(ends, R, ce):
             g = 1.0 / r if k < 0 else 1.0 / (rbar[int(k)] * d[int(k)])
             for s, t in ((i, j), (j, i)):
                 if s >= nx:
                     continue  # boundary nodes have no equation
-                A[s, s] -= g / cap[s]
+                a_terms.setdefault((s, s), []).append(-g / cap[s])
                 if t < nx:
-                    A[s, t] += g / cap[s]
+                    a_terms.setdefault((s, t), []).append(g / cap[s])
                 else:
-                    Bt[s, t - nx] += g / cap[s]
+                    b_terms.setdefault((s, t - nx), []).append(g / cap[s])
+        A = _triplet(a_terms, nx, nx)
+        Bt = _triplet(b_terms, nx, nb)
         nz = net.n_zones
         Cz = cap_fixed[:nz]
         cp = net.spec.cp
@@ -336,12 +352,13 @@ class ThermalModel:
         if substeps is None:
             substeps = max(1, math.ceil(dt / 60.0))
         steppers = {}
-        for k in range(U.shape[0]):
-            j = inverse[k]
-            A_u, b = self.affine(U[k], mats=mats)
-            if j not in steppers:
-                steppers[j] = make_stepper(A_u, dt, method, substeps)
-            X[k + 1] = steppers[j](X[k], b)
+        with single_thread_blas():
+            for k in range(U.shape[0]):
+                j = inverse[k]
+                A_u, b = self.affine(U[k], mats=mats)
+                if j not in steppers:
+                    steppers[j] = make_stepper(A_u, dt, method, substeps)
+                X[k + 1] = steppers[j](X[k], b)
         return X
 
     def _simulate_cvodes(self, U, dt, X, p):

@@ -1,0 +1,411 @@
+"""Reading measured data: the file, its columns, time stamps and units.
+
+:func:`read_measurements` loads a CSV/parquet file or a DataFrame, matches its columns to
+the building spec, parses the time stamps, converts to SI, clips negative flows, sorts
+and merges duplicate stamps, then puts every column on the model grid
+(:mod:`thermctl.data._grid`) and reports what it did in a
+:class:`~thermctl.data.measurements.QualityReport`.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import logging
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import DataError, DataWarning
+from ..spec import RHO_AIR, BuildingSpec
+from ._grid import (_EXACT, _EXCLUDED, _FILLED, _RESAMPLED, _make_grid, _regrid, _runs,
+                    _timedelta)
+from .measurements import Gap, Measurements, QualityReport, _short_list
+
+__all__ = ["read_measurements", "CFM"]
+
+logger = logging.getLogger(__name__)
+
+CFM = 0.3048 ** 3 / 60.0
+"""One cubic foot per minute [m³/s]."""
+
+_PREFIXES = ("T", "Ts", "ms", "vs", "Q", "solar")
+_OFFSET_RE = re.compile(r"(Z|[+-]\d{2}:?\d{2})$")
+_HAS_OFFSET_RE = re.compile(r"(?:Z|[+-]\d{2}:?\d{2})$")
+
+
+def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
+                      gap_limit="30min", tz=None, name: str | None = None) -> Measurements:
+    """Read measured data (CSV, parquet or a DataFrame) onto a regular SI grid.
+
+    Parameters
+    ----------
+    source : str, Path or pandas.DataFrame
+        ``.csv`` (any other suffix is read as CSV) or ``.parquet``/``.pq`` file, or a
+        DataFrame with a ``time`` column (or a ``DatetimeIndex``).
+    spec : BuildingSpec
+        Gives the zones (``T:`` needed for every measured zone) and boundary nodes
+        (``T:`` needed for each).
+    units : {"si", "imperial"}, default "si"
+        ``si``: °C, kg/s, m³/s, W, W/m². ``imperial``: °F for ``T:``/``Ts:``, CFM for
+        ``ms:`` and ``vs:`` (ρ = 1.2 kg/m³); W and W/m² unchanged.
+    step : str or Timedelta, optional
+        Model grid step (must divide a day). Default: the data's median spacing, snapped
+        to a whole number of minutes (seconds below one minute) dividing a day.
+    gap_limit : str or Timedelta, default "30min"
+        Longest gap (time between the valid samples around it) that is linearly
+        interpolated; longer gaps stay NaN and are reported. ``0`` fills nothing.
+    tz : str, optional
+        Time zone of the result (IANA name, ``"UTC"`` or ``"+01:00"``); also the zone of
+        stamps without a UTC offset. Default: the data's own offset (UTC for naive stamps).
+    name : str, optional
+        Name used in messages for a DataFrame source.
+
+    Returns
+    -------
+    Measurements
+
+    Raises
+    ------
+    DataError
+        One line naming the file and the column, zone or line at fault.
+
+    Examples
+    --------
+    >>> spec = load_spec("building.yaml")                      # doctest: +SKIP
+    >>> meas = read_measurements("data.csv", spec, units="imperial")  # doctest: +SKIP
+    >>> cal, val = meas.split()                                 # doctest: +SKIP
+    >>> print(meas.quality.summary())                           # doctest: +SKIP
+    """
+    if units not in ("si", "imperial"):
+        raise DataError(f"units must be 'si' or 'imperial', found {units!r}")
+    df, src, row_label = _load_table(source, name)
+    cols = _classify(df.columns, spec, src)
+    t_ns, tzinfo, notes = _parse_time(df["time"], src, tz, row_label)
+    gap_ns = _timedelta(gap_limit, "gap_limit").value
+    if gap_ns < 0:
+        raise DataError(f"gap_limit must be >= 0, found {gap_limit!r}")
+
+    # numbers, unit conversion, flow clipping (per file column, before any regridding)
+    values, missing, conversions, clipped = {}, {}, [], {}
+    for fcol, scol in cols["used"].items():
+        v = _numeric(df[scol], src, scol, row_label)
+        missing[scol] = int(np.isnan(v).sum())
+        v, conv = _to_si(v, scol, units)
+        if conv:
+            conversions.append(conv)
+        if fcol.startswith("ms:"):
+            neg = v < 0
+            if neg.any():
+                clipped[scol] = int(neg.sum())
+                v = np.where(neg, 0.0, v)
+        values[fcol] = v
+    if clipped:
+        warnings.warn(f"{src}: negative flows set to 0: {clipped}", DataWarning, stacklevel=2)
+
+    # order, duplicates
+    raw = pd.DataFrame(values, index=pd.Index(t_ns, name="time"))
+    out_of_order = int((np.diff(t_ns) < 0).sum())
+    raw = raw.sort_index(kind="stable")
+    dup = raw.index.duplicated(keep=False)
+    n_dups, conflicts = 0, 0
+    if dup.any():
+        grp = raw[dup].groupby(level=0)
+        n_dups = int(dup.sum() - grp.ngroups)
+        conflicts = int((grp.nunique(dropna=False) > 1).any(axis=1).sum())
+        raw = raw.groupby(level=0, sort=True).mean()
+        logger.info("%s: %d duplicate rows removed (%d conflicting)", src, n_dups, conflicts)
+    t = raw.index.to_numpy(dtype=np.int64)
+    if len(t) < 2:
+        raise DataError(f"{src}: need at least 2 distinct time stamps, found {len(t)}")
+
+    # grid
+    grid = _make_grid(t, step, tzinfo, src, notes)
+    index = grid.index
+    frame, counts, gaps = {}, {c: {} for c in range(4)}, []
+    for fcol, v in raw.items():
+        scol = cols["used"][fcol]
+        vals, code = _regrid(t, v.to_numpy(), grid.times, grid.bridge, gap_ns)
+        frame[fcol] = vals
+        for c in range(4):
+            counts[c][scol] = int((code == c).sum())
+        gaps += [Gap(scol, index[a], index[b - 1], b - a) for a, b in _runs(code == _EXCLUDED)]
+    frame = pd.DataFrame(frame, index=index)
+
+    notes += _sanity(frame, spec, units)
+    quality = QualityReport(
+        source=src, units=units, rows_read=len(df), columns_used=dict(cols["used"]),
+        ignored_columns=cols["ignored"], unmeasured_zone_columns=cols["unmeasured"],
+        zones_without_supply=cols["no_supply"], conversions=conversions,
+        time_zone=str(tzinfo), step=grid.step_ns / 1e9, step_inferred=step is None,
+        data_step=grid.data_step / 1e9, start=index[0], end=index[-1], n_samples=len(index),
+        rows_out_of_order=out_of_order, duplicates_removed=n_dups,
+        duplicate_conflicts=conflicts, off_grid_stamps=grid.off_grid, missing_cells=missing,
+        exact=counts[_EXACT], resampled=counts[_RESAMPLED], interpolated=counts[_FILLED],
+        excluded=counts[_EXCLUDED], long_gaps=gaps, clipped_flows=clipped, notes=notes)
+    if gaps:
+        warnings.warn(f"{src}: {sum(g.n for g in gaps)} samples excluded in {len(gaps)} long "
+                      f"gap(s) over {len({g.column for g in gaps})} column(s), e.g. "
+                      f"{gaps[0].column} {gaps[0].start} to {gaps[0].end}", DataWarning,
+                      stacklevel=2)
+    for note in notes:
+        logger.info("%s: %s", src, note)
+    return Measurements(frame, pd.Timedelta(grid.step_ns), spec, units, src, quality)
+
+
+# ---------------------------------------------------------------------------- internals
+def _load_table(source, name):
+    """Read the table; returns (DataFrame with a 'time' column, source name, row labeller)."""
+    if isinstance(source, pd.DataFrame):
+        src = name or "<DataFrame>"
+        df = source.copy()
+        df.columns = [str(c).strip() for c in df.columns]
+        if "time" not in df.columns and isinstance(df.index, pd.DatetimeIndex):
+            df = df.rename_axis("time").reset_index()
+        dupes = sorted({c for c in df.columns if list(df.columns).count(c) > 1})
+        _check_table(df, src, dupes)
+        df = df.reset_index(drop=True)
+        return df, src, (lambda i: f"row {i}")
+    path = Path(source)
+    src = str(path)
+    if not path.exists():
+        raise DataError(f"{src}: data file not found")
+    if not path.is_file():
+        raise DataError(f"{src}: not a file")
+    if path.stat().st_size == 0:
+        raise DataError(f"{src}: data file is empty")
+    parquet = path.suffix.lower() in (".parquet", ".pq")
+    try:
+        if parquet:
+            df = pd.read_parquet(path)
+            if "time" not in df.columns and df.index.name == "time":
+                df = df.reset_index()
+            df.columns = [str(c).strip() for c in df.columns]
+            dupes = sorted({c for c in df.columns if list(df.columns).count(c) > 1})
+        else:
+            with open(path, newline="", encoding="utf-8-sig") as fh:
+                header = next(csv.reader(fh), [])
+            header = [h.strip() for h in header]
+            dupes = sorted({h for h in header if header.count(h) > 1})
+            if not any(h for h in header):
+                raise DataError(f"{src}: data file is empty (no header line)")
+            df = pd.read_csv(path, encoding="utf-8-sig", skipinitialspace=True)
+            df.columns = [str(c).strip() for c in df.columns]
+    except DataError:
+        raise
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError,
+            ValueError) as exc:
+        kind = "parquet" if parquet else "CSV"
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"{src}: not a readable {kind} file: {msg}") from None
+    _check_table(df, src, dupes)
+    # CSV line of data row i: line 1 is the header
+    return df, src, ((lambda i: f"row {i}") if parquet else (lambda i: f"line {i + 2}"))
+
+
+def _check_table(df, src, dupes):
+    if dupes:
+        raise DataError(f"{src}: column(s) {dupes} appear more than once")
+    if "time" not in df.columns:
+        hint = ""
+        if len(df.columns) == 1 and any(s in str(df.columns[0]) for s in ";\t"):
+            hint = " (the file looks ';'- or tab-separated; expected commas)"
+        raise DataError(f"{src}: no 'time' column{hint}; found columns "
+                        f"{_short_list([str(c) for c in df.columns])}")
+    if len(df) == 0:
+        raise DataError(f"{src}: data file has a header but no data rows")
+
+
+def _classify(columns, spec: BuildingSpec, src):
+    """Map file columns to frame columns; check them against the spec."""
+    zones, bnd = spec.zone_names, list(spec.boundary)
+    measured = set(spec.measured_zones)
+    t_cols, zone_cols, solar, ignored, unmeasured = {}, {}, [], [], []
+    unknown_t, unknown_z = [], []
+    for col in columns:
+        if col == "time":
+            continue
+        prefix, sep, node = col.partition(":")
+        if not sep or prefix not in _PREFIXES or not node:
+            ignored.append(col)
+        elif prefix == "T":
+            if node in measured or node in bnd:
+                t_cols[node] = col
+            elif node in zones:
+                unmeasured.append(col)
+            else:
+                unknown_t.append(node)
+        elif prefix == "solar":
+            solar.append(col)
+        elif node in zones:
+            zone_cols[(prefix, node)] = col
+        else:
+            unknown_z.append(col)
+    need = [n for n in list(spec.measured_zones) + bnd if n not in t_cols]
+    if unknown_t or need:
+        parts = []
+        if unknown_t:
+            parts.append(f"T: column(s) for node(s) not in the spec: {unknown_t}")
+        if need:
+            parts.append(f"measured zone(s)/boundary node(s) with no T: column: {need}")
+        raise DataError(f"{src}: columns do not match {spec.source}: " + "; ".join(parts)
+                        + f" (spec zones {zones}, boundary {bnd})")
+    if unknown_z:
+        raise DataError(f"{src}: column(s) {unknown_z} name no zone of {spec.source} "
+                        f"(zones {zones}; boundary nodes take only T: columns)")
+    used, no_supply = {}, []
+    for node in list(spec.measured_zones) + bnd:
+        used[f"T:{node}"] = t_cols[node]
+    for z in zones:
+        ms, vs, ts = (zone_cols.get((p, z)) for p in ("ms", "vs", "Ts"))
+        if ms and vs:
+            raise DataError(f"{src}: zone {z!r} has both {ms} and {vs}; give one supply flow")
+        flow = ms or vs
+        if flow and not ts:
+            raise DataError(f"{src}: zone {z!r} has supply flow {flow} but no Ts:{z} column")
+        if ts and not flow:
+            raise DataError(f"{src}: zone {z!r} has {ts} but no supply flow (ms:{z} or vs:{z})")
+        if flow:
+            used[f"Ts:{z}"] = ts
+            used[f"ms:{z}"] = flow
+        else:
+            no_supply.append(z)
+    for z in zones:
+        if ("Q", z) in zone_cols:
+            used[f"Q:{z}"] = zone_cols[("Q", z)]
+    for col in solar:
+        used[col] = col
+    if unmeasured:
+        warnings.warn(f"{src}: {unmeasured} belong to zone(s) the spec marks 'measured: false'; "
+                      "ignored (set measured: true to use them)", DataWarning, stacklevel=3)
+    return {"used": used, "ignored": ignored, "unmeasured": unmeasured, "no_supply": no_supply}
+
+
+def _parse_time(col: pd.Series, src, tz, row_label):
+    """Time stamps → (int64 ns UTC array, tzinfo of the result, notes)."""
+    notes = []
+    target = _tzinfo(tz) if tz is not None else None
+    empty = col.isna()
+    if empty.any():
+        raise DataError(f"{src}: column 'time' is empty at {row_label(int(np.argmax(empty)))}")
+    if pd.api.types.is_datetime64_any_dtype(col):
+        idx = pd.DatetimeIndex(col)
+        native = idx.tz
+        if native is None:
+            idx, native = _localize(idx, target, src, notes)
+        utc = idx.tz_convert("UTC")
+        out_tz = target or native
+    else:
+        s = col.astype(str).str.strip()
+        # naive stamps parse as UTC wall clock here; they are localized below
+        parsed = pd.to_datetime(s, format="ISO8601", utc=True, errors="coerce")
+        bad = parsed.isna().to_numpy()
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise DataError(f"{src}: column 'time': cannot parse {s.iloc[i]!r} at {row_label(i)} "
+                            f"({int(bad.sum())} unparsable); expected ISO 8601 such as "
+                            "2011-01-21T00:05:00-05:00")
+        has_off = s.str.contains(_HAS_OFFSET_RE)
+        if has_off.any() and not has_off.all():
+            i = int(np.argmax(~has_off.to_numpy() if has_off.iloc[0] else has_off.to_numpy()))
+            raise DataError(f"{src}: column 'time' mixes stamps with and without a UTC offset "
+                            f"(first different: {s.iloc[i]!r} at {row_label(i)})")
+        idx = pd.DatetimeIndex(parsed)
+        if has_off.all():
+            offsets = sorted({_offset_minutes(m) for m in s.str.extract(_OFFSET_RE)[0].unique()})
+            native = _fixed(offsets[0])
+            if len(offsets) > 1 and target is None:
+                notes.append(f"time stamps carry UTC offsets {offsets} min; days are taken in "
+                             f"standard time {native}")
+            utc = idx
+            out_tz = target or native
+        else:
+            idx, out_tz = _localize(idx.tz_localize(None), target, src, notes)
+            utc = idx.tz_convert("UTC")
+    t_ns = utc.as_unit("ns").asi8.copy()
+    return t_ns, out_tz, notes
+
+
+def _localize(idx, target, src, notes):
+    if target is None:
+        notes.append("time stamps have no UTC offset; taken as UTC")
+        return idx.tz_localize("UTC"), dt.timezone.utc
+    try:
+        return idx.tz_localize(target, ambiguous="infer", nonexistent="raise"), target
+    except Exception as exc:        # pytz/zoneinfo raise several types for DST problems
+        why = str(exc).splitlines()[0].split(". Try")[0] if str(exc) else type(exc).__name__
+        raise DataError(f"{src}: column 'time': local stamps do not fit time zone {target} "
+                        f"({why}); export stamps with a UTC offset") from None
+
+
+def _offset_minutes(text) -> int:
+    if text == "Z":
+        return 0
+    sign = -1 if text[0] == "-" else 1
+    digits = text[1:].replace(":", "")
+    return sign * (int(digits[:2]) * 60 + int(digits[2:]))
+
+
+def _fixed(minutes: int):
+    """Fixed-offset tzinfo (``UTC`` for 0, else ``UTC±hh:mm``)."""
+    return dt.timezone(dt.timedelta(minutes=minutes)) if minutes else dt.timezone.utc
+
+
+def _tzinfo(tz):
+    if isinstance(tz, dt.tzinfo):
+        return tz
+    text = str(tz).strip()
+    m = re.fullmatch(r"(?:UTC)?([+-]\d{2}:?\d{2})", text)
+    if m:
+        return _fixed(_offset_minutes(m.group(1)))
+    try:
+        return pd.Timestamp("2000-01-01", tz=text).tzinfo
+    except Exception:               # the tz libraries raise several exception types
+        raise DataError(f"tz: unknown time zone {tz!r} (use an IANA name such as "
+                        "'America/New_York', 'UTC' or an offset '+01:00')") from None
+
+
+def _numeric(col: pd.Series, src, name, row_label) -> np.ndarray:
+    num = pd.to_numeric(col, errors="coerce")
+    bad = (col.notna() & num.isna()).to_numpy()
+    inf = np.isinf(num.to_numpy(dtype=float))
+    if bad.any() or inf.any():
+        i = int(np.argmax(bad | inf))
+        raise DataError(f"{src}: column {name}: non-numeric value {col.iloc[i]!r} at "
+                        f"{row_label(i)} ({int((bad | inf).sum())} such cells)")
+    v = num.to_numpy(dtype=float)
+    if np.isnan(v).all():
+        raise DataError(f"{src}: column {name} has no values (all empty/NaN)")
+    return v
+
+
+def _to_si(v, col, units):
+    prefix = col.partition(":")[0]
+    if units == "imperial":
+        if prefix in ("T", "Ts"):
+            return (v - 32.0) / 1.8, f"{col} °F → °C"
+        if prefix in ("ms", "vs"):
+            return v * CFM * RHO_AIR, f"{col} CFM → kg/s (ρ = {RHO_AIR} kg/m³)"
+    elif prefix == "vs":
+        return v * RHO_AIR, f"{col} m³/s → kg/s (ρ = {RHO_AIR} kg/m³)"
+    return v, None
+def _sanity(frame, spec, units) -> list[str]:
+    """Warn when zone temperatures look like the other unit system."""
+    cols = [f"T:{z}" for z in spec.measured_zones if f"T:{z}" in frame]
+    if not cols:
+        return []
+    med = float(np.nanmedian(frame[cols].to_numpy()))
+    msg = None
+    if units == "si" and med > 45:
+        msg = (f"median zone temperature {med:.1f} °C looks like °F; "
+               "read with units='imperial' (--units imperial)?")
+    elif units == "imperial" and med < 5:
+        msg = (f"median zone temperature {med * 1.8 + 32:.1f} °F looks like °C; "
+               "read with units='si'?")
+    if msg:
+        warnings.warn(msg, DataWarning, stacklevel=3)
+        return [msg]
+    return []
