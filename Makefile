@@ -17,9 +17,14 @@ $(STAMP): pyproject.toml | $(BIN)/python
 demo: $(STAMP)
 	$(BIN)/thermctl demo --out demo-output
 
+# One BLAS thread per test worker: two workers on two cores, small matrices.
+test: export OPENBLAS_NUM_THREADS = 1
+test: export OMP_NUM_THREADS = 1
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -m "not slow" -q
 
+test-all: export OPENBLAS_NUM_THREADS = 1
+test-all: export OMP_NUM_THREADS = 1
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 

@@ -153,10 +153,15 @@ class BuildingSpec:
 
     def distance(self, a: str, b: str) -> float | None:
         """Air path length between two zones [m], or None if the spec gives none."""
-        for dist in self.distances:
-            if {dist.a, dist.b} == {a, b}:
-                return dist.d
-        return None
+        return self.distance_table().get(frozenset((a, b)))
+
+    def distance_table(self) -> dict:
+        """``{frozenset((a, b)): d}`` for every given air path length [m] (cached)."""
+        table = self.__dict__.get("_distance_table")
+        if table is None:
+            table = {frozenset((d.a, d.b)): d.d for d in self.distances}
+            object.__setattr__(self, "_distance_table", table)  # frozen dataclass cache
+        return table
 
     def alphas(self) -> dict[str, float]:
         """alpha of every wall, keyed by wall label."""

@@ -1,0 +1,176 @@
+"""Command line: end to end on a small testbed, and every bad input of issue 14.
+
+Each bad input must give one clear line on stderr, a non-zero exit code, no
+traceback, and leave the output directory as it was.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from thermctl.cli import app
+from thermctl.testbed import generate
+
+runner = CliRunner()
+
+
+def run(*args):
+    res = runner.invoke(app, [str(a) for a in args])
+    return res
+
+
+@pytest.fixture(scope="module")
+def tb_dir(tmp_path_factory):
+    """A 12-day testbed (enough days for SIN with 6 measured zones: N >= n + 2)."""
+    out = tmp_path_factory.mktemp("tb")
+    generate(days=12, seed=3).write(out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def identified(tb_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ident")
+    res = run("identify", tb_dir / "data.csv", "--building", tb_dir / "building.yaml",
+              "--out", out, "--estimator", "single_shooting", "--no-grid")
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_identify_writes_complete_outputs(identified):
+    model = json.loads((identified / "model.json").read_text())
+    assert model["format"] == "thermctl-model"
+    ident = json.loads((identified / "identification.json").read_text())
+    assert ident["structure"]["days_used"] >= 8
+    assert {"network", "scores", "correlations"} <= {f["name"] for f in
+                                                     json.loads((identified / "figures.json").read_text())}
+    assert not [p for p in identified.parent.iterdir() if p.name.startswith(f".{identified.name}.")], \
+        "staging directory left behind"
+
+
+def test_validate_and_report(identified, tb_dir):
+    res = run("validate", identified / "model.json", tb_dir / "data.csv", "--hours", 24)
+    assert res.exit_code == 0, res.output
+    doc = json.loads((identified / "validation.json").read_text())
+    # truth.json beside the data: the truth's step responses are compared too
+    assert set(doc["step_response_error"]) == {"identified", "conduction-only"}
+    assert doc["rmse_mean"]["identified"] > 0
+    res = run("report", identified)
+    assert res.exit_code == 0, res.output
+    html = (identified / "report.html").read_text()
+    assert "data:image/png;base64," in html and "Step-response error" in html
+
+
+def test_export_roundtrip(identified, tmp_path):
+    from thermctl.io import load_statespace
+    res = run("export", identified / "model.json", "--statespace", tmp_path / "ss.npz",
+              "--op", "ms=0.05", "--op", "Ts=14", "--op", "T=10", "--dt", 300)
+    assert res.exit_code == 0, res.output
+    sys, op = load_statespace(tmp_path / "ss.npz")
+    assert sys.dt == 300 and sys.state_labels[0].startswith("T[")
+    assert np.all(np.abs(np.linalg.eigvals(sys.A)) < 1.0)  # a stable discrete system
+
+
+def _write_csv(path, text):
+    path.write_text(text)
+    return path
+
+
+def _bad_data(tb_dir, tmp_path, kind):
+    """A data file broken in one way (from the good testbed file)."""
+    df = pd.read_csv(tb_dir / "data.csv")
+    p = tmp_path / "bad.csv"
+    if kind == "missing":
+        return tmp_path / "nope.csv"
+    if kind == "empty":
+        return _write_csv(p, "")
+    if kind == "no-time":
+        df = df.drop(columns="time")
+    elif kind == "bad-time":
+        df.loc[5, "time"] = "yesterday at noon"
+    elif kind == "non-numeric":
+        df["T:r240"] = df["T:r240"].astype(object)
+        df.loc[7, "T:r240"] = "warm"
+    elif kind == "all-nan":
+        df["T:r241"] = np.nan
+    elif kind == "unknown-node":
+        df["T:r999"] = 20.0
+    elif kind == "zone-without-data":
+        df = df.drop(columns="T:r242")
+    elif kind == "few-days":
+        df = df.iloc[: 288 * 4]
+    df.to_csv(p, index=False)
+    return p
+
+
+BAD_DATA = [
+    ("missing", r"nope\.csv"),
+    ("empty", r"bad\.csv.*empty"),
+    ("no-time", r"bad\.csv.*time"),
+    ("bad-time", r"bad\.csv.*time"),
+    ("non-numeric", r"bad\.csv.*T:r240"),
+    ("all-nan", r"bad\.csv.*T:r241"),
+    ("unknown-node", r"bad\.csv.*r999"),
+    ("zone-without-data", r"bad\.csv.*r242"),
+    ("few-days", r"days"),
+]
+
+
+@pytest.mark.parametrize("kind, match", BAD_DATA, ids=[k for k, _ in BAD_DATA])
+def test_identify_bad_data(tb_dir, tmp_path, kind, match):
+    data = _bad_data(tb_dir, tmp_path, kind)
+    out = tmp_path / "out"
+    res = run("identify", data, "--building", tb_dir / "building.yaml", "--out", out,
+              "--estimator", "none", "--no-grid")
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    import re
+    err = res.output.strip().splitlines()
+    assert any(line.startswith("error:") for line in err), res.output
+    assert re.search(match, res.output.replace("\n", " ")), res.output
+    assert not out.exists(), "a failed run must not leave outputs"
+
+
+def test_validation_window_outside_data(identified, tb_dir):
+    res = run("validate", identified / "model.json", tb_dir / "data.csv",
+              "--validation", "2030-01-01..2030-01-05")
+    assert res.exit_code == 2 and "error:" in res.output and "Traceback" not in res.output
+
+
+def test_model_from_another_spec(identified, tmp_path):
+    other = generate("corridor", zones=5, days=1, seed=1)
+    other.write(tmp_path)
+    res = run("validate", identified / "model.json", tmp_path / "data.csv")
+    assert res.exit_code == 2 and "error:" in res.output, res.output
+    assert "Traceback" not in res.output
+
+
+def test_unwritable_output_directory(tb_dir, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    res = run("identify", tb_dir / "data.csv", "--building", tb_dir / "building.yaml",
+              "--out", blocker / "sub", "--estimator", "none", "--no-grid")
+    assert res.exit_code == 2 and "error:" in res.output, res.output
+    assert "Traceback" not in res.output
+
+
+def test_existing_outputs_survive_a_failed_run(identified, tb_dir, tmp_path):
+    before = (identified / "model.json").read_bytes()
+    res = run("identify", tmp_path / "missing.csv", "--building", tb_dir / "building.yaml",
+              "--out", identified)
+    assert res.exit_code == 2
+    assert (identified / "model.json").read_bytes() == before
+
+
+@pytest.mark.parametrize("cmd", ["identify", "validate", "export", "report", "simulate", "demo",
+                                 "testbed", "info"])
+def test_every_command_has_help_with_example(cmd):
+    res = run(cmd, "--help")
+    assert res.exit_code == 0
+    assert "Example" in res.output
