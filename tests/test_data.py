@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from thermctl.data import CFM, Measurements, QualityReport, read_measurements
+from thermctl.data import CFM, Measurements, QualityReport, day_array, read_measurements
 from thermctl.errors import DataError, DataWarning
 from thermctl.network import ThermalNetwork
 from thermctl.spec import load_spec
@@ -131,10 +131,19 @@ def test_twinhouse_inputs_days_and_split(twin):
     np.testing.assert_array_equal(U[:, col["T[cellar]"]], f["T:cellar"])
     np.testing.assert_array_equal(U[:, col["Q[kitchen]"]], f["Q:kitchen"])
     days = meas.day_time_array()
-    assert days.X.shape == (41, 144, 7)
-    assert days.days_used[0] == dt.date(2013, 8, 21) and days.days_used[-1] == dt.date(2013, 9, 30)
-    assert days.days_dropped == [(dt.date(2013, 10, 1), "incomplete (1 of 144 samples)")]
-    np.testing.assert_array_equal(days.X[1, 6, 0], f["T:living"].iloc[144 + 6])
+    assert days.values.shape == (41, 144, 7)
+    assert days.days[0] == dt.date(2013, 8, 21) and days.days[-1] == dt.date(2013, 9, 30)
+    assert days.dropped == [(dt.date(2013, 10, 1), "incomplete (1 of 144 samples)")]
+    np.testing.assert_array_equal(days.values[1, 6, 0], f["T:living"].iloc[144 + 6])
+    assert days.zones == list(spec.measured_zones) and days.step == 600.0 and days.n_times == 144
+    # the same shaping of the zone-named frame, step inferred from the index: identical
+    plain = day_array(meas.zone_temperatures(), days.zones)
+    np.testing.assert_array_equal(plain.values, days.values)
+    assert (plain.days, plain.dropped, plain.step) == (days.days, days.dropped, days.step)
+    # one sample: the step comes from the grid, not the index; the day is incomplete
+    one = meas.window(meas.start, duration="10min").day_time_array()
+    assert one.values.shape == (0, 144, 7)
+    assert one.dropped == [(dt.date(2013, 8, 21), "incomplete (1 of 144 samples)")]
     assert meas.require_days(9, "SIN with 7 zones") == 41
     cal, val = meas.split()      # not the paper's dates: the last quarter (10 of 41 days)
     assert cal.start == meas.start and cal.end == pd.Timestamp("2013-09-20T23:50+01:00")
@@ -233,9 +242,9 @@ def test_short_and_long_gaps(small_spec):
     assert seg[1][0] == f.index[312]
     # the day holding the long gap leaves the day × time array, named
     days = meas.day_time_array()
-    assert days.X.shape == (1, 288, 3)
-    assert days.days_dropped[0][0] == dt.date(2011, 3, 2)
-    assert days.days_dropped[0][1].startswith("gap in T:r1, T:r2, T:r3")
+    assert days.values.shape == (1, 288, 3)
+    assert days.dropped[0][0] == dt.date(2011, 3, 2)
+    assert days.dropped[0][1].startswith("gap in T:r1, T:r2, T:r3")
 
 
 @pytest.mark.parametrize("gap_limit, filled, excluded", [
@@ -332,12 +341,12 @@ def test_utc_offset_days_are_local(small_spec):
     assert meas.quality.time_zone == "UTC-05:00"
     assert meas.start.hour == 0 and meas.start.utcoffset() == dt.timedelta(hours=-5)
     days = meas.day_time_array()
-    assert days.days_used == [dt.date(2011, 3, 1), dt.date(2011, 3, 2)] and not days.days_dropped
+    assert days.days == [dt.date(2011, 3, 1), dt.date(2011, 3, 2)] and not days.dropped
     # the same data read in UTC has its days cut at UTC midnight: 3 partial days
     utc = read_quiet(df, small_spec, tz="UTC")
     assert utc.start == meas.start and str(utc.tz) == "UTC"
     d = utc.day_time_array()
-    assert len(d.days_used) == 1 and len(d.days_dropped) == 2
+    assert len(d.days) == 1 and len(d.dropped) == 2
 
 
 def test_daylight_saving_offsets_use_standard_time(small_spec):
@@ -371,8 +380,9 @@ def test_naive_local_stamps_in_a_dst_zone(small_spec, tmp_path):
     assert len(meas) == 73 and meas.quality.duplicates_removed == 0
     np.testing.assert_allclose(meas.frame["T:r1"], df["T:r1"], atol=1e-12)
     days = meas.day_time_array()
-    assert days.days_used == [dt.date(2011, 11, 5), dt.date(2011, 11, 7)]
-    assert days.days_dropped == [(dt.date(2011, 11, 6), "incomplete (25 of 24 samples)")]
+    assert days.days == [dt.date(2011, 11, 5), dt.date(2011, 11, 7)]
+    assert days.dropped == [(dt.date(2011, 11, 6),
+                             "repeated time of day (clock change, 25 of 24 samples)")]
     # a wall-clock time that does not exist (spring forward) cannot be placed
     df.loc[70:, "time"] = ["2012-03-11T01:00:00", "2012-03-11T02:00:00", "2012-03-11T03:00:00"]
     with pytest.raises(DataError, match=r"data\.csv: column 'time': local stamps do not fit"):

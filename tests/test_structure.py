@@ -376,6 +376,7 @@ def test_day_array_drops_and_counts():
     df = df.iloc[5:]                                 # day 1 starts at 05:00
     da = day_array(df, ZONES[:4])
     assert da.values.shape == (3, 24, 4) and da.step == 3600.0
+    assert da.zones == ZONES[:4] and da.n_times == 24
     reasons = dict(da.dropped)
     assert list(reasons) == [pd.Timestamp(d).date() for d in
                              ("2024-01-01", "2024-01-02", "2024-01-05")]
@@ -397,6 +398,8 @@ def test_day_array_clock_change():
     df = pd.DataFrame({"a": 0.0, "b": 1.0}, index=idx)
     da = day_array(df, ["a", "b"])
     assert dict(da.dropped)[pd.Timestamp("2024-11-03").date()].startswith("repeated time")
+    assert dict(da.dropped)[pd.Timestamp("2024-11-03").date()] == \
+        "repeated time of day (clock change, 25 of 24 samples)"
 
 
 @pytest.mark.parametrize("make, match", [

@@ -231,7 +231,7 @@ def write_outputs(ident: Identification, outdir) -> dict:
                     "Marginal vs partial correlation over the day (paper Fig. 7).")
         if ident.grid is not None:
             from .plots.estimate import plot_cost_vs_rbar
-            save_figure(plot_cost_vs_rbar(ident.grid, ident.estimate), tmp, "cost", "Parameters",
+            save_figure(plot_cost_vs_rbar(ident.grid, fit=ident.estimate), tmp, "cost", "Parameters",
                         "Prediction cost J vs R̄_v for several τ0 = R̄_v·C_v (paper Fig. 4).")
         doc = identification_document(ident)
         (tmp / "identification.json").write_text(json.dumps(doc, indent=2, default=_plain))

@@ -45,14 +45,16 @@ Choices this package makes (``docs/data-format.md`` repeats them for users):
 Nothing here writes a file.
 
 Layout: :mod:`._read` (file, columns, time stamps, units; :func:`read_measurements`),
-:mod:`._grid` (step, grid, resampling, gap runs), :mod:`.measurements` (the results).
+:mod:`._grid` (step, grid, resampling, gap runs), :mod:`.measurements` (the results),
+:mod:`.days` (day × time-of-day arrays of any regular frame: :func:`day_array`).
 """
 
-from .measurements import (PAPER_CALIBRATION, PAPER_VALIDATION_START, DayArray, Gap,
-                           Measurements, QualityReport)
+from .days import DayArray, day_array
+from .measurements import (PAPER_CALIBRATION, PAPER_VALIDATION_START, Gap, Measurements,
+                           QualityReport)
 from ._read import CFM, read_measurements
 
 __all__ = [
-    "read_measurements", "Measurements", "QualityReport", "Gap", "DayArray",
+    "read_measurements", "Measurements", "QualityReport", "Gap", "DayArray", "day_array",
     "CFM", "PAPER_CALIBRATION", "PAPER_VALIDATION_START",
 ]

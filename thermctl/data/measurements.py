@@ -13,7 +13,6 @@ import logging
 import re
 import warnings
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -21,9 +20,9 @@ import pandas as pd
 from ..errors import DataError, DataWarning
 from ..spec import BuildingSpec
 from ._grid import _DAY_NS, _fmt_step, _runs, _timedelta
+from .days import DayArray, day_array
 
-__all__ = ["Measurements", "QualityReport", "Gap", "DayArray",
-           "PAPER_CALIBRATION", "PAPER_VALIDATION_START"]
+__all__ = ["Measurements", "QualityReport", "Gap", "PAPER_CALIBRATION", "PAPER_VALIDATION_START"]
 
 logger = logging.getLogger(__name__)
 
@@ -178,23 +177,6 @@ class QualityReport:
         return "\n".join(lines)
 
 
-class DayArray(NamedTuple):
-    """Zone temperatures arranged day × time of day, for structure identification.
-
-    Attributes
-    ----------
-    X : ndarray, shape (n_days, K, n_zones)
-        Temperature [°C]; ``K = 1 day / step``.
-    days_used : list of datetime.date
-    days_dropped : list of (datetime.date, str)
-        Days left out and why (incomplete day, or a gap in a named column).
-    """
-
-    X: np.ndarray
-    days_used: list
-    days_dropped: list
-
-
 # ---------------------------------------------------------------------------- Measurements
 @dataclass
 class Measurements:
@@ -283,11 +265,7 @@ class Measurements:
         zones : list of str, optional
             Default: the spec's measured zones, in spec order.
         """
-        zones = list(self.spec.measured_zones if zones is None else zones)
-        bad = [z for z in zones if f"T:{z}" not in self.frame or z not in self.spec.zone_names]
-        if bad:
-            raise DataError(f"{self.source}: no measured temperature for zone(s) {bad}; "
-                            f"measured zones are {self.spec.measured_zones}")
+        zones = self._zone_list(zones)
         out = self.frame[[f"T:{z}" for z in zones]].copy()
         out.columns = zones
         return out
@@ -428,16 +406,18 @@ class Measurements:
             The number of usable days.
         """
         arr = self.day_time_array()
-        if len(arr.days_used) < n:
-            gaps = sum(1 for _, r in arr.days_dropped if not r.startswith("incomplete"))
+        if len(arr.days) < n:
+            gaps = sum(1 for _, r in arr.dropped if r.startswith("gap in"))
             raise DataError(
                 f"{self.source}: {why} needs at least {n} whole days without gaps, found "
-                f"{len(arr.days_used)} ({len(arr.days_dropped)} dropped: {gaps} with gaps, "
-                f"{len(arr.days_dropped) - gaps} incomplete)")
-        return len(arr.days_used)
+                f"{len(arr.days)} ({len(arr.dropped)} dropped: {gaps} with gaps, "
+                f"{len(arr.dropped) - gaps} incomplete or with a clock change)")
+        return len(arr.days)
 
     def day_time_array(self, zones=None) -> DayArray:
         """Zone temperatures as days × time-of-day, whole days without gaps only.
+
+        A thin call of :func:`thermctl.data.day_array` on the ``T:<zone>`` columns.
 
         Parameters
         ----------
@@ -447,43 +427,25 @@ class Measurements:
         Returns
         -------
         DayArray
-            ``(X, days_used, days_dropped)``; ``X`` has shape (days, K, zones) [°C] with
-            ``K = 1 day / step``. Days are local calendar days of :attr:`tz`; a day is
-            dropped when it lacks any of its K stamps (data start/end, a daylight-saving
-            change) or a zone temperature is NaN in it.
+            ``values`` has shape (days, K, zones) [°C] with ``K = 1 day / step``. Days
+            are local calendar days of :attr:`tz`; a day is dropped (and listed in
+            ``dropped`` with the reason) when it lacks any of its K stamps (data
+            start/end, a daylight-saving change) or a zone temperature is NaN in it.
         """
-        temps = self.zone_temperatures(zones)
-        step_ns = int(self.step.value)
-        if _DAY_NS % step_ns:
-            raise DataError(f"{self.source}: step {self.step} does not divide a day; "
-                            "no time-of-day index")
-        K = _DAY_NS // step_ns
-        idx = self.frame.index
-        tod = (idx - idx.normalize()).as_unit("ns").asi8
-        k = tod // step_ns
-        dates = np.asarray(idx.date)
-        vals = temps.to_numpy()
-        used, dropped, X = [], [], []
-        bounds = np.flatnonzero(np.r_[True, dates[1:] != dates[:-1], True])
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            day = dates[a]
-            kk = k[a:b]
-            if b - a != K or not np.array_equal(kk, np.arange(K)) or (tod[a:b] % step_ns).any():
-                dropped.append((day, f"incomplete ({b - a} of {K} samples)"))
-                continue
-            bad = ~np.isfinite(vals[a:b]).all(axis=0)
-            if bad.any():
-                cols = [f"T:{z}" for z, m in zip(temps.columns, bad) if m]
-                dropped.append((day, "gap in " + ", ".join(cols)))
-                continue
-            used.append(day)
-            X.append(vals[a:b])
-        X = np.stack(X) if X else np.empty((0, K, vals.shape[1]))
-        if dropped:
-            logger.info("%s: %d day(s) used, %d dropped", self.source, len(used), len(dropped))
-        return DayArray(X, used, dropped)
+        zones = self._zone_list(zones)
+        return day_array(self.frame[[f"T:{z}" for z in zones]], zones,
+                         step=self.step.total_seconds())
 
     # ---- helpers ---------------------------------------------------------------
+    def _zone_list(self, zones) -> list:
+        """``zones`` (default: the spec's measured zones), checked to have ``T:`` columns."""
+        zones = list(self.spec.measured_zones if zones is None else zones)
+        bad = [z for z in zones if f"T:{z}" not in self.frame or z not in self.spec.zone_names]
+        if bad:
+            raise DataError(f"{self.source}: no measured temperature for zone(s) {bad}; "
+                            f"measured zones are {self.spec.measured_zones}")
+        return zones
+
     def _instant(self, x, what) -> pd.Timestamp:
         try:
             ts = pd.Timestamp(x)
