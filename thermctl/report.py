@@ -33,7 +33,7 @@ table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#eef2f6}
 td:first-child,th:first-child{text-align:left}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
-figcaption{font-size:.9em;color:#555}.note{background:#fff8e1;border-left:4px solid #f0b400;
+figcaption{font-size:.9em;color:#555}pre{background:#f6f8fa;padding:.6em;overflow-x:auto;font-size:.85em}.note{background:#fff8e1;border-left:4px solid #f0b400;
 padding:.4em .8em}.muted{color:#777;font-size:.85em}
 """
 
@@ -118,6 +118,8 @@ def build_report(outdir, title: str | None = None) -> Path:
                 parts.append(_table(b["content"]))
             elif b["kind"] == "note":
                 parts.append(f"<p class='note'>{html.escape(b['content'])}</p>")
+            elif "\n" in b["content"]:
+                parts.append(f"<pre>{html.escape(b['content'])}</pre>")
             else:
                 parts.append(f"<p>{html.escape(b['content'])}</p>")
         for f in sec_figs:
