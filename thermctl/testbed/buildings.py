@@ -319,16 +319,12 @@ def corridor_floor_spec(n_per_side: int, floors: int = 1, seed: int = 0, **kwarg
         Number of floors (>= 1). Zones: ``floors · (2 n + 1)``.
     seed : int
         Seed of the door positions and the true air paths.
-    office_width, depth, height : float
-        Office size [m] (defaults 4, 5, 3).
-    corridor_width : float
-        [m], default 2.
-    p_edge : float
-        Probability that an office gets an air path partner [-], default 0.35.
-    max_edge_distance : float
-        Longest true air path [m], default 8.
-    max_distance : float
-        Longest candidate air path written to the spec [m], default 15.
+    **kwargs
+        Geometry passed to :func:`corridor_layout`: ``office_width``, ``depth``,
+        ``height`` (office size [m], defaults 4, 5, 3), ``corridor_width`` [m] (2),
+        ``p_edge`` (probability that an office gets an air path partner [-], 0.35),
+        ``max_edge_distance`` (longest true air path [m], 8), ``max_distance`` (longest
+        candidate air path written to the spec [m], 15).
 
     Returns
     -------
