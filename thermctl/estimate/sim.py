@@ -26,15 +26,13 @@ depend on the convection parameters: convection edges join zones only.
 
 from __future__ import annotations
 
-import contextlib
-import threading
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from threadpoolctl import ThreadpoolController
 
+from .._blas import single_thread_blas as _single_threaded_blas  # noqa: F401 (re-used by siblings)
 from ..errors import EstimationError
 
 __all__ = ["Simulator", "ExactSimulator", "CostEval"]
@@ -465,25 +463,6 @@ class ExactSimulator(Simulator):
                 if self.counts[j] == 1:
                     del cache[j]
         return X
-
-
-_CONTROLLER = None
-
-
-def _single_threaded_blas():
-    """Limit BLAS to one thread (from the main thread only: the limit is process-wide,
-    so worker threads leave it to the caller, e.g. :func:`~.grid.grid_search`).
-
-    The matrices here are small: BLAS threads only fight each other (and other
-    processes). The library scan is done once (``ThreadpoolController``), because
-    ``threadpool_limits`` rescans the loaded libraries on every call.
-    """
-    global _CONTROLLER
-    if threading.current_thread() is not threading.main_thread():
-        return contextlib.nullcontext()
-    if _CONTROLLER is None:
-        _CONTROLLER = ThreadpoolController()
-    return _CONTROLLER.limit(limits=1)
 
 
 def _ridge_lstsq(H, rhs, w):

@@ -34,8 +34,8 @@ import pandas as pd
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
-from threadpoolctl import threadpool_limits
 
+from .._blas import single_thread_blas
 from ..errors import ModelError
 from ..model import ThermalModel
 from .disturbances import Disturbances
@@ -564,6 +564,3 @@ def run_closed_loop(plant: Plant, controller, n_steps: int | None = None, callba
     return meas
 
 
-def single_thread_blas():
-    """Context: BLAS on one thread (the plant's products are small; threads only cost)."""
-    return threadpool_limits(limits=1, user_api="blas")
