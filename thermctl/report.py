@@ -23,7 +23,7 @@ from .io import atomic_write_text  # noqa: E402
 
 __all__ = ["save_figure", "build_report"]
 
-SECTIONS = ["Data quality", "Structure", "Parameters", "Validation", "Model"]
+SECTIONS = ["Data quality", "Structure", "Parameters", "Validation", "Reduction", "Model"]
 
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;margin:2em auto;
@@ -92,13 +92,13 @@ def build_report(outdir, title: str | None = None) -> Path:
         raise DataError(f"{outdir}: not a directory (run `thermctl identify ... --out {outdir}` first)")
     blocks = []
     sources = []
-    for name in ("identification.json", "validation.json"):
+    for name in ("identification.json", "validation.json", "reduction.json"):
         p = outdir / name
         if p.exists():
             sources.append(name)
             blocks += json.loads(p.read_text()).get("report", [])
     if not sources:
-        raise DataError(f"{outdir}: no identification.json or validation.json to report on")
+        raise DataError(f"{outdir}: no identification.json, validation.json or reduction.json to report on")
     manifest_path = outdir / "figures.json"
     figures = json.loads(manifest_path.read_text()) if manifest_path.exists() else []
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title or 'thermctl report')}"

@@ -49,10 +49,10 @@ def export(
     statespace: Path = typer.Option(None, "--statespace", help="Write the linearized StateSpace (.npz)."),
     casadi_path: Path = typer.Option(None, "--casadi", help="Write CasADi f(x,u) (Function.save); "
                                      "also FILE.step with F(x,u,dt) and FILE.json with the names."),
-    op: list[str] = typer.Option([], "--op", help="Operating point: NAME=VALUE or NAME[node]=VALUE, "
-                                 "NAME in ms [kg/s], Ts [°C], T [°C, boundary], Q [W]. Repeatable. "
+    op: list[str] = typer.Option([], "--op", help="Operating point: NAME=VALUE or NAME\\[node]=VALUE, "
+                                 "NAME in ms (kg/s), Ts (°C), T (°C, boundary), Q (W). Repeatable. "
                                  "The state is the steady state for these inputs."),
-    dt: float = typer.Option(None, "--dt", help="Discretise the StateSpace by ZOH with this step [s]."),
+    dt: float = typer.Option(None, "--dt", help="Discretise the StateSpace by ZOH with this step (s)."),
     substeps: int = typer.Option(5, "--substeps", help="Sub-steps of the CasADi discrete step."),
 ):
     """Export an identified model for control design.

@@ -59,7 +59,7 @@ def identify(
     level: float = typer.Option(0.05, help="SIN significance level."),
     allow_parallel: bool = typer.Option(False, help="Allow air paths beside walls (open doors)."),
     estimator: str = typer.Option("nlp", help="nlp (multiple shooting, IPOPT), single_shooting, grid or none."),
-    window_hours: float = typer.Option(12.0, help="Cost window at the start of the calibration data [h]."),
+    window_hours: float = typer.Option(12.0, help="Cost window at the start of the calibration data (h)."),
     initial_state: str = typer.Option("paper", help="paper (mean of ends), burn_in or estimate."),
     grid: bool = typer.Option(True, help="Also run the paper's grid search (reference, Fig. 4)."),
     calibration: str = typer.Option(None, help="Calibration window START..END (dates)."),
@@ -125,7 +125,7 @@ def validate(
     data: Path = typer.Argument(..., help="Measurements (same format as for identify)."),
     out: Path = typer.Option(None, "--out", "-o", help="Output directory (default: the model's)."),
     units: str = typer.Option("si", help=UNITS_HELP),
-    hours: float = typer.Option(48.0, help="Open-loop window [h] (paper: 48)."),
+    hours: float = typer.Option(48.0, help="Open-loop window in hours (paper: 48)."),
     start: str = typer.Option(None, help="Window start (default: start of the validation data)."),
     validation: str = typer.Option(None, help="Validation window START..END (default as identify)."),
     truth: Path = typer.Option(None, help="truth.json of testbed data (default: beside DATA if present)."),
@@ -237,7 +237,7 @@ def simulate(
     out: Path = typer.Option(..., "--out", "-o", help="CSV of simulated zone temperatures (°C)."),
     units: str = typer.Option("si", help=UNITS_HELP),
     start: str = typer.Option(None, help="Start (default: data start)."),
-    hours: float = typer.Option(None, help="Length [h] (default: to the end of the data)."),
+    hours: float = typer.Option(None, help="Length in hours (default: to the end of the data)."),
 ):
     """Simulate a model open loop with measured inputs from the first sample.
 
