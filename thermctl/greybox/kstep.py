@@ -1,0 +1,161 @@
+"""k-step-ahead prediction from Kalman-filtered states (validation measure).
+
+Restart every ``stride`` from the filtered state :math:`\\hat x_{t|t}` of the stationary
+filter, predict ``h`` steps ahead with the measured inputs and without further updates,
+and compare with the measured zone temperatures. The unmeasured gains are held at their
+filtered values over the horizon (the random walk's best prediction), and the supply
+heat uses the *predicted* zone temperature, so a prediction learns nothing from the
+measurements it is scored on. This is the measure DESIGN.md asks for at 1, 6 and 24 h,
+for the identified and the conduction-only model alike.
+
+The CasADi version of the same criterion (for estimation) is
+:meth:`GreyboxProblem.kstep <thermctl.greybox.problem.GreyboxProblem.kstep>`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DataError
+from .kalman import single_thread
+
+__all__ = ["KStepResult", "filtered_states", "kstep_errors"]
+
+
+@dataclass
+class KStepResult:
+    """k-step-ahead prediction errors.
+
+    Attributes
+    ----------
+    horizons : ndarray, shape (n_h,)
+        [s]
+    zones : list of str
+        Measured zones (columns of ``rmse``).
+    rmse : ndarray, shape (n_h, n_zones)
+        Root-mean-square error per horizon and zone [K].
+    bias : ndarray, shape (n_h, n_zones)
+        Mean error (prediction − measurement) [K].
+    n : ndarray of int, shape (n_h,)
+        Predictions scored per horizon.
+    """
+
+    horizons: np.ndarray
+    zones: list
+    rmse: np.ndarray
+    bias: np.ndarray
+    n: np.ndarray
+
+    @property
+    def rmse_mean(self) -> np.ndarray:
+        """RMSE over all zones per horizon [K]."""
+        return np.sqrt(np.mean(self.rmse ** 2, axis=1))
+
+    def table(self) -> str:
+        head = "horizon  " + " ".join(f"{z:>9s}" for z in self.zones) + "       all"
+        rows = [head]
+        for h, r, m in zip(self.horizons, self.rmse, self.rmse_mean):
+            rows.append(f"{h / 3600:5.1f} h  " + " ".join(f"{v:9.3f}" for v in r) + f" {m:9.3f}")
+        return "\n".join(rows)
+
+
+def filtered_states(problem, eta):
+    """Run the stationary filter of ``problem`` at ``eta`` in numpy.
+
+    Returns
+    -------
+    list of (a, b, X_pred, X_filt, E)
+        Per data segment ``[a, b)``: predicted and filtered states, shape (b − a, n), and
+        innovations, shape (b − a, ny).
+    """
+    m = problem.matrices(eta)
+    W = problem.inputs(eta)
+    Phi, Gam, Kf, C = m["Phi"], m["Gamma"], m["Kf"], problem.C
+    out = []
+    with single_thread():
+        for s, (a, b) in enumerate(problem.segments):
+            x = m["X0"][:, s].copy()
+            Xp = np.empty((b - a, problem.n))
+            Xf = np.empty((b - a, problem.n))
+            E = np.empty((b - a, problem.ny))
+            for k in range(a, b):
+                e = problem.Y[k] - C @ x
+                Xp[k - a] = x
+                x = x + Kf @ e
+                Xf[k - a] = x
+                E[k - a] = e
+                x = Phi @ x + Gam @ W[k]
+            out.append((a, b, Xp, Xf, E))
+    return out
+
+
+def kstep_errors(problem, eta, horizons=(3600.0, 6 * 3600.0, 24 * 3600.0), stride: float | None = 3600.0,
+                 rows: str = "all") -> KStepResult:
+    """Prediction errors at several horizons from filtered states.
+
+    Parameters
+    ----------
+    problem : GreyboxProblem
+        Built on the data to score (validation data: build it with
+        :meth:`GreyboxEstimator.problem_for`).
+    eta : array_like
+        Parameters (e.g. ``estimator.eta_``).
+    horizons : sequence of float
+        Prediction horizons [s], multiples of the data step.
+    stride : float
+        Spacing of the restarts [s].
+    rows : {"all", "fit"}
+        Score every prediction, or only those whose target row is one the likelihood
+        used (e.g. supply off).
+
+    Returns
+    -------
+    KStepResult
+    """
+    dt = problem.data.dt
+    hs = np.array([int(round(h / dt)) for h in horizons])
+    if np.any(hs < 1):
+        raise DataError(f"horizons must be at least one step ({dt:g} s), found {list(horizons)}")
+    st = max(1, int(round((stride or dt) / dt)))
+    m = problem.matrices(eta)
+    W = problem.inputs(eta)
+    Phi, Gam, C = m["Phi"], m["Gamma"], problem.C
+    ny, nz = problem.ny, problem.nz
+    meas = problem.meas
+    CT = np.zeros((ny, problem.n))
+    CT[np.arange(ny), meas] = 1.0
+    sse = np.zeros((len(hs), ny))
+    se = np.zeros((len(hs), ny))
+    cnt = np.zeros(len(hs), dtype=int)
+    use = problem.fit_rows if rows == "fit" else np.ones(len(problem.Y), dtype=bool)
+    with single_thread():
+        for a, b, Xp, Xf, E in filtered_states(problem, eta):
+            starts = np.arange(a + problem.burn, b - 1, st)
+            if not len(starts):
+                continue
+            X = Xf[starts - a].T.copy()                     # (n, R)
+            hmax = hs.max()
+            for j in range(1, hmax + 1):
+                idx = starts + j - 1
+                live = idx + 1 < b
+                idc = np.minimum(idx, b - 1)
+                Wj = W[idc].T.copy()
+                fb = problem.sup_gain[idc].T * (CT @ X - problem.Tbar[idc].T)
+                Wj[meas] -= fb
+                X = Phi @ X + Gam @ Wj
+                for q in np.flatnonzero(hs == j):
+                    tgt = starts + j
+                    ok = live & (tgt < b)
+                    ok[ok] &= use[tgt[ok]]
+                    if not ok.any():
+                        continue
+                    err = (C @ X[:, ok]).T - problem.Y[tgt[ok]]
+                    sse[q] += np.sum(err ** 2, axis=0)
+                    se[q] += np.sum(err, axis=0)
+                    cnt[q] += int(ok.sum())
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rmse = np.sqrt(sse / cnt[:, None])
+        bias = se / cnt[:, None]
+    return KStepResult(np.asarray(horizons, float), list(problem.data.zones), rmse, bias, cnt)

@@ -1,0 +1,762 @@
+r"""The stochastic grey-box model of a thermal network and its CasADi criteria.
+
+State: the network's states ``x`` (zone air, 3R2C edge states) plus, per measured zone,
+an unmeasured heat gain :math:`\phi_z` [kW] that follows a random walk
+(:math:`d\phi_z = \sigma_\phi\,d\beta`, the offset-free disturbance model of MPC):
+
+.. math::
+
+    C_z\,dT_z = \Big(\sum g (T_j - T_z) + q_z + Q_z + \textstyle\sum_s a_{z,s} I_s
+               + \sum_b \beta_{z,b}\,\varphi_b(t) + \phi_z\Big) dt + \sigma_q\,d\beta_z,
+    \qquad y_k = T_{z,k} + v_k,\; v_k \sim N(0, \sigma_v^2).
+
+``q_z = \dot m_s c_p (T_s - \bar T_z)`` is the supply heat. The network is bilinear
+(``ms·T``); closed-loop flows change every step, so an exact per-step discretisation
+would cost an n×n exponential per step *and per parameter value*. Instead the supply
+heat is computed from the *measured* zone temperature (mean of the two samples that
+bracket the step, ``supply_temperature="midpoint"``): the model becomes linear
+time-invariant, and its exact discretisation and stationary Kalman filter are computed
+once per parameter value (see :mod:`.kalman`). The error is the sensor error times
+``ms·cp`` (0.02 K · 0.3 kg/s · 1 kJ/(kg K) ≈ 6 W), far below the gains it competes with.
+An unmeasured zone keeps the bilinear term at its mean flow in ``A``; the deviation
+from it is applied to the mean measured temperature (exact when it has no supply air).
+
+Parameters (:mod:`.params`): R̄_v (shared or per edge), τ0 = R̄_v·C_v (its bounds are the
+paper's :math:`t_{min}/\alpha \le \tau_0 \le t_{max}/\alpha`), noise intensities σ_v, σ_q,
+σ_φ, solar apertures on measured ``solar:`` columns, and coefficients of a time-of-day
+basis of the gains (occupied/unoccupied levels or Fourier terms).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import DataError, EstimationError
+from ..model import C_V_PAPER, RBAR_V_PAPER, ThermalModel
+from ..network import ThermalNetwork
+from . import kalman
+from .data import GreyboxData
+from .params import Param, ParamLayout
+
+__all__ = ["GreyboxOptions", "GreyboxProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
+
+log = logging.getLogger(__name__)
+
+T_MIN, T_MAX = 4.0, 20.0        # [s/m], the paper's range of convective time constants per metre
+RBAR_BOUNDS = (1e-6, 1e-2)      # [K/(W m)], the paper's search range
+_KW = 1e-3                      # gains and heat inputs are in kW inside: states O(0.1–1)
+
+
+@dataclass(frozen=True)
+class GreyboxOptions:
+    """Model and criterion options of :class:`GreyboxProblem`.
+
+    Attributes
+    ----------
+    per_edge : bool
+        One R̄_v per convection edge (τ0 stays shared) instead of one for all.
+    disturbance : {"random_walk", "none"}
+        Random-walk gain state per measured zone, or none (white heat noise only).
+    unmeasured_gain : bool
+        Unmeasured zones (a hallway) get the time-of-day basis too (and a constant without
+        random walk). Their temperature is only seen through their neighbours, so no
+        random walk there (it would not be detectable); a constant alone would be
+        indistinguishable from shifted gains of the measured zones.
+    basis : {None, "levels", "fourier"}
+        Deterministic time-of-day part of the gains of each measured zone: ``levels`` =
+        an occupied-hours indicator, ``fourier`` = ``harmonics`` daily harmonics. Without
+        the random walk every measured zone also gets a constant gain.
+    harmonics : int
+    occupied_hours : (float, float)
+        Local hours of the ``levels`` indicator [h].
+    weekdays_only : bool
+        ``levels`` indicator on Monday–Friday only.
+    solar : "auto", bool or list of str
+        Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
+        those zones; False = none.
+    noise : {"shared", "zone"}
+        One σ_q, σ_φ, σ_v for all zones, or one per zone.
+    burn_in : float
+        Time at the start of every data segment left out of the likelihood and the k-step
+        restarts (the filter still runs through it) [s].
+    initial_state : {"steady", "paper"}
+        ``steady``: zones at their first sample, all other states at the steady state of
+        the first day's mean inputs, gains at that day's mean imbalance (depends on θ);
+        ``paper``: the paper's mean-of-ends start, zero gains.
+    supply_temperature : {"midpoint", "start"}
+        Zone temperature used in the supply heat of a step: mean of the bracketing
+        samples, or the sample at its start (causal).
+    horizon : float
+        Horizon of the k-step criterion [s].
+    stride : float or None
+        Spacing of the k-step restarts [s] (default: the horizon).
+    rbar_bounds : (float, float)
+        [K/(W m)]
+    t_min, t_max : float
+        Convective time constant per unit distance [s/m] (paper: 4 and 20).
+    alpha : float or None
+        Default: the spec's (median of its walls).
+    sda_iterations : int
+        Doubling iterations of the stationary Riccati solution in the graph.
+    riccati : {"implicit", "doubling"}
+        ``implicit``: the stationary Riccati equation is solved in numpy and differentiated
+        through its adjoint Stein equation (fast; second derivatives by finite differences
+        of that exact adjoint). ``doubling``: ``sda_iterations`` doubling steps inside the
+        CasADi graph (exact derivatives of every order, ~3× slower).
+    measurement : {"white", "ar1"}
+        Sensor error model: white, or white plus a first-order autoregressive error per
+        measured zone (``σ_e``, ``τ_e``) — what quantisation of a slowly moving
+        temperature looks like (a 0.1 °F step is crossed only every few samples).
+    fit_rows : "auto", "all", "supply_off" or array of bool
+        Rows whose one-step innovations enter the likelihood and whose horizons the k-step
+        restarts may cover; the filter runs through all rows either way. ``supply_off``:
+        only samples after ``holdoff`` without supply air in any zone (nights, weekends);
+        ``auto``: ``supply_off`` if that leaves at least 15 % of the samples and a day,
+        else ``all``. Why: a zone controller acts on readings the log
+        does not hold (between samples, before rounding), so in closed loop the logged
+        supply carries information about the state the filter cannot see, which biases
+        the likelihood toward strong mixing; with the supply off the inputs are exact.
+    holdoff : float
+        With ``fit_rows="supply_off"``: time after the supply went off before samples
+        count [s].
+    """
+
+    per_edge: bool = False
+    disturbance: str = "random_walk"
+    unmeasured_gain: bool = True
+    basis: str | None = None
+    harmonics: int = 2
+    occupied_hours: tuple = (7.0, 19.0)
+    weekdays_only: bool = True
+    solar: object = "auto"
+    noise: str = "shared"
+    burn_in: float = 6 * 3600.0
+    initial_state: str = "steady"
+    supply_temperature: str = "midpoint"
+    horizon: float = 3600.0
+    stride: float | None = None
+    rbar_bounds: tuple = RBAR_BOUNDS
+    t_min: float = T_MIN
+    t_max: float = T_MAX
+    alpha: float | None = None
+    sda_iterations: int = 30
+    riccati: str = "implicit"
+    measurement: str = "white"
+    fit_rows: object = "auto"
+    holdoff: float = 3 * 3600.0
+
+    def check(self):
+        if self.riccati not in ("implicit", "doubling"):
+            raise EstimationError(f"riccati must be 'implicit' or 'doubling', found {self.riccati!r}")
+        if self.measurement not in ("white", "ar1"):
+            raise EstimationError(f"measurement must be 'white' or 'ar1', found {self.measurement!r}")
+        if self.disturbance not in ("random_walk", "none"):
+            raise EstimationError(f"disturbance must be 'random_walk' or 'none', found "
+                                  f"{self.disturbance!r}")
+        if self.basis not in (None, "levels", "fourier"):
+            raise EstimationError(f"basis must be None, 'levels' or 'fourier', found {self.basis!r}")
+        if self.noise not in ("shared", "zone"):
+            raise EstimationError(f"noise must be 'shared' or 'zone', found {self.noise!r}")
+        if self.initial_state not in ("steady", "paper"):
+            raise EstimationError(f"initial_state must be 'steady' or 'paper', found "
+                                  f"{self.initial_state!r}")
+        if self.supply_temperature not in ("midpoint", "start"):
+            raise EstimationError("supply_temperature must be 'midpoint' or 'start', found "
+                                  f"{self.supply_temperature!r}")
+        if not 0 < self.t_min < self.t_max:
+            raise EstimationError(f"need 0 < t_min < t_max [s/m], found {self.t_min}, {self.t_max}")
+
+
+class GreyboxProblem:
+    """Likelihood and k-step criterion of a network model on data, as CasADi functions.
+
+    The decision vector ``eta`` is described by :attr:`layout`. Everything that depends on
+    the parameters is one CasADi MX graph (discretisation, stationary Riccati solution,
+    initial states, filter recursion), so the gradient and the Hessian are exact.
+
+    Parameters
+    ----------
+    network : ThermalNetwork
+        The structure (conduction and convection edges).
+    data : GreyboxData
+    options : GreyboxOptions, optional
+    rbar_v : float or array_like
+        Start value of R̄_v [K/(W m)] (shared or per edge).
+    c_v : float or None
+        Start value of C_v [J/K]; default: τ0 at the geometric mean of its bounds.
+    init : dict, optional
+        Start values by parameter name (natural units), e.g. from a previous fit.
+
+    Attributes
+    ----------
+    layout : ParamLayout
+    n_obs : int
+        Scalar observations in the likelihood.
+    n_restarts : int
+        k-step restarts.
+    """
+
+    def __init__(self, network: ThermalNetwork, data: GreyboxData, options: GreyboxOptions | None = None,
+                 *, rbar_v=RBAR_V_PAPER, c_v=None, init: dict | None = None):
+        self.options = opt = options or GreyboxOptions()
+        opt.check()
+        data.check(network)
+        self.network = network
+        self.data = data
+        self.model = ThermalModel(network)
+        self.sym = self.model.sym
+        net = network
+        self.zones = list(net.zones)
+        self.nz, self.nb = net.n_zones, len(net.boundary)
+        self.n_net = net.n_states
+        self.meas = [self.zones.index(z) for z in data.zones]
+        self.ny = len(self.meas)
+        if self.ny == 0:
+            raise DataError("no measured zone temperature in the data")
+        self.n_d = self.ny if opt.disturbance == "random_walk" else 0
+        self.n_e = self.ny if opt.measurement == "ar1" else 0
+        self.n = self.n_net + self.n_d + self.n_e
+        self.nw = self.nz + self.nb
+        self.edges = net.convection_edges
+        self.alpha = float(opt.alpha if opt.alpha is not None else net.spec.alpha())
+        self.tau_bounds = (opt.t_min / self.alpha, opt.t_max / self.alpha)
+        self.cap_z = 1.0 / np.asarray(self.sym.inv_cz, dtype=float)
+        self._prepare_inputs()
+        self._make_layout(rbar_v, c_v, init or {})
+        self._make_chunks()
+        self._build()
+
+    # ------------------------------------------------------------------ data → arrays
+    def _prepare_inputs(self):
+        d, net, opt = self.data, self.network, self.options
+        sl = net.input_slices()
+        U, Y = d.U, d.Y
+        N = len(d)
+        cp = net.spec.cp
+        ms, Ts, Tb, Q = U[:, sl["ms"]], U[:, sl["Ts"]], U[:, sl["T"]], U[:, sl["Q"]]
+        Tbar = Y.copy()
+        if opt.supply_temperature == "midpoint" and N > 1:
+            nxt = np.vstack([Y[1:], Y[-1:]])
+            Tbar = np.where(np.isfinite(nxt), 0.5 * (Y + nxt), Y)
+        with np.errstate(invalid="ignore"):
+            Tref = np.nanmean(Tbar, axis=1) if self.ny else np.full(N, 20.0)
+        heat = Q.copy()
+        # for k-step predictions the supply heat uses the *predicted* temperature:
+        # heat(T̂) = heat(T̄) − ms·cp·(T̂ − T̄) (explicit over a step; C_z/(ms cp) ≫ dt)
+        self.sup_gain = np.zeros((N, self.ny))      # ms·cp [kW/K] of measured zones
+        self.Tbar = np.nan_to_num(Tbar)
+        self.d_sup = np.zeros(self.n_net)
+        valid = d.valid() & np.isfinite(Tbar).all(axis=1)
+        for i, z in enumerate(self.zones):
+            if i in self.meas:
+                j = self.meas.index(i)
+                heat[:, i] += ms[:, i] * cp * (Ts[:, i] - Tbar[:, j])
+                self.sup_gain[:, j] = ms[:, i] * cp * _KW
+            else:
+                mbar = float(np.mean(ms[valid, i])) if valid.any() else 0.0
+                self.d_sup[i] = mbar * self.sym.kz[i]
+                heat[:, i] += ms[:, i] * cp * Ts[:, i] - (ms[:, i] - mbar) * cp * Tref
+        self.W0 = np.vstack([heat.T * _KW, Tb.T])                         # (nw, N)
+        self.fit_rows = self._fit_rows(ms)
+        self.valid = valid & np.isfinite(self.W0).all(axis=0)
+        # deterministic basis rows: solar columns, then time-of-day functions
+        rows, names = [], []
+        self.solar_zones = self._solar_zones()
+        self.solar_zones_idx = [self.zones.index(z) for z in self.solar_zones]
+        for s, name in enumerate(d.solar_names):
+            rows.append(d.solar[:, s])
+            names.append(("solar", name))
+        self.basis_zones = [self.solar_zones_idx] * len(rows)
+        for name, row, zones in self._time_basis(N):
+            rows.append(row)
+            names.append(("time", name))
+            self.basis_zones.append(zones)
+        self.basis_rows = names
+        self.Bas = np.vstack(rows) if rows else np.zeros((0, N))
+        self.Y = Y
+
+    def _fit_rows(self, ms):
+        """Rows whose innovations enter the likelihood (see ``GreyboxOptions.fit_rows``)."""
+        rule = self.options.fit_rows
+        N = len(ms)
+        if isinstance(rule, str):
+            if rule not in ("all", "supply_off", "auto"):
+                raise EstimationError(f"fit_rows must be 'auto', 'all', 'supply_off' or a boolean "
+                                      f"array, found {rule!r}")
+            if rule == "all":
+                self.fit_rule = "all"
+                return np.ones(N, dtype=bool)
+            off = np.all(ms <= 1e-9, axis=1)
+            # y_k is predicted through the input of row k-1; count it once the supply has
+            # been off for `holdoff` (the filter first forgets the closed loop)
+            h = 1 + int(round(self.options.holdoff / self.data.dt))
+            run = np.zeros(N, dtype=int)
+            for k in range(1, N):
+                run[k] = run[k - 1] + 1 if off[k - 1] else 0
+            out = run >= h
+            if rule == "auto" and out.sum() < max(0.15 * N, 86400.0 / self.data.dt):
+                log.info("fit_rows='auto': only %d of %d samples follow %g h without supply air; "
+                         "using all samples", int(out.sum()), N, self.options.holdoff / 3600)
+                self.fit_rule = "all"
+                return np.ones(N, dtype=bool)
+            self.fit_rule = "supply_off"
+            return out
+        out = np.asarray(rule, dtype=bool)
+        if out.shape != (N,):
+            raise EstimationError(f"fit_rows: expected {N} booleans (one per row), found shape "
+                                  f"{out.shape}")
+        self.fit_rule = "given"
+        return out
+
+    def _solar_zones(self):
+        sol = self.options.solar
+        if not self.data.solar_names or sol is False or sol is None:
+            return []
+        if sol is True or sol == "auto":
+            return list(self.zones)
+        bad = [z for z in sol if z not in self.zones]
+        if bad:
+            raise EstimationError(f"solar: zone(s) {bad} are not zones of the network")
+        return list(sol)
+
+    def _time_basis(self, N):
+        """Deterministic gain rows: ``(name, row, zone indices)``."""
+        opt = self.options
+        unmeas = [i for i in range(self.nz) if i not in self.meas] if opt.unmeasured_gain else []
+        # with random-walk gains a constant input anywhere is observationally equivalent
+        # to shifted gains (the filter starts at the matching steady state): no constant
+        const_zones = list(self.meas) + unmeas if opt.disturbance == "none" else []
+        out = []
+        if const_zones:
+            out.append(("const", np.ones(N), const_zones))
+        if opt.basis is None:
+            return out
+        t = self.data.time
+        if t is None:
+            raise DataError(f"basis={opt.basis!r} needs time stamps; the data has none")
+        hour = np.asarray(t.hour + t.minute / 60.0 + t.second / 3600.0, dtype=float)
+        zones = list(self.meas) + unmeas
+        if opt.basis == "levels":
+            h0, h1 = opt.occupied_hours
+            occ = (hour >= h0) & (hour < h1)
+            if opt.weekdays_only:
+                occ &= np.asarray(t.dayofweek < 5)
+            out.append(("occupied", occ.astype(float), zones))
+        else:
+            for k in range(1, opt.harmonics + 1):
+                out.append((f"cos{k}", np.cos(2 * np.pi * k * hour / 24.0), zones))
+                out.append((f"sin{k}", np.sin(2 * np.pi * k * hour / 24.0), zones))
+        return out
+
+    # ------------------------------------------------------------------ parameters
+    def _make_layout(self, rbar_v, c_v, init):
+        opt, lay = self.options, ParamLayout()
+        m = len(self.edges)
+        lo_r, hi_r = opt.rbar_bounds
+        lo_t, hi_t = self.tau_bounds
+        self.i_rbar, self.i_tau = [], None
+        if m:
+            rb = np.broadcast_to(np.asarray(rbar_v, dtype=float), (m,))
+            if opt.per_edge:
+                for e, r in zip(self.edges, rb):
+                    self.i_rbar.append(lay.add(Param(f"rbar_v[{e.name}]", "rbar_v", True,
+                                                     float(np.clip(r, lo_r, hi_r)), lo_r, hi_r)))
+            else:
+                r0 = float(np.exp(np.mean(np.log(rb))))
+                self.i_rbar = [lay.add(Param("rbar_v", "rbar_v", True, float(np.clip(r0, lo_r, hi_r)),
+                                             lo_r, hi_r))] * m
+            t0 = math.sqrt(lo_t * hi_t) if c_v is None else float(np.exp(np.mean(np.log(rb)))) * c_v
+            self.i_tau = lay.add(Param("tau0", "tau0", True, float(np.clip(t0, lo_t, hi_t)), lo_t, hi_t))
+        shared = opt.noise == "shared"
+        mz = [self.zones[i] for i in self.meas]
+        cz_med = float(np.median(self.cap_z))
+        sq0 = 0.02 * cz_med / math.sqrt(self.data.dt)    # ≈ 0.02 K of white wander per step
+        if shared:
+            self.i_sv = [lay.add(Param("sigma_v", "sigma_v", True, 0.02, 1e-4, 2.0))] * self.ny
+            self.i_sq = [lay.add(Param("sigma_q", "sigma_q", True, sq0, 1e-1, 1e7))] * self.nz
+        else:
+            self.i_sv = [lay.add(Param(f"sigma_v[{z}]", "sigma_v", True, 0.02, 1e-4, 2.0)) for z in mz]
+            self.i_sq = [lay.add(Param(f"sigma_q[{z}]", "sigma_q", True, sq0, 1e-1, 1e7))
+                         for z in self.zones]
+        self.i_sphi = []
+        if self.n_d:
+            s0 = 100.0 / 60.0    # 100 W per hour
+            if shared:
+                self.i_sphi = [lay.add(Param("sigma_phi", "sigma_phi", True, s0, 1e-3, 1e3))] * self.ny
+            else:
+                self.i_sphi = [lay.add(Param(f"sigma_phi[{z}]", "sigma_phi", True, s0, 1e-3, 1e3))
+                               for z in mz]
+        if self.n_e:
+            self.i_sige = lay.add(Param("sigma_e", "sigma_e", True, 0.015, 1e-4, 1.0))
+            self.i_taue = lay.add(Param("tau_e", "tau_e", True, 1800.0, 60.0, 86400.0))
+        # linear parameters: entries of Theta (nz × n_basis)
+        self.lin = []          # (param index, zone index, basis row)
+        for b, (kind, name) in enumerate(self.basis_rows):
+            if kind == "solar":
+                for z in self.solar_zones:
+                    i = lay.add(Param(f"aperture[{z},{name}]", "aperture", False, 0.5, 0.0, 50.0, 1.0))
+                    self.lin.append((i, self.zones.index(z), b))
+            else:
+                for zi in self.basis_zones[b]:
+                    z = self.zones[zi]
+                    i = lay.add(Param(f"gain[{z},{name}]", "gain", False, 0.0, -5e3, 5e3, 100.0))
+                    self.lin.append((i, zi, b))
+        for name, v in init.items():
+            if name in lay.names:
+                p = lay.params[lay.index(name)]
+                p.init = float(np.clip(v, p.lower, p.upper))
+        self.layout = lay
+
+    # ------------------------------------------------------------------ chunk layout
+    def _make_chunks(self):
+        opt, dt = self.options, self.data.dt
+        ok = np.r_[False, self.valid, False].astype(np.int8)
+        e = np.flatnonzero(np.diff(ok))
+        self.burn = int(round(opt.burn_in / dt))
+        segs = [(int(a), int(b)) for a, b in zip(e[::2], e[1::2]) if b - a > self.burn + 1]
+        dropped = sum(1 for a, b in zip(e[::2], e[1::2]) if b - a <= self.burn + 1)
+        if dropped:
+            log.info("%d data segment(s) no longer than the burn-in (%g h) left out", dropped,
+                     opt.burn_in / 3600)
+        if not segs:
+            raise DataError(f"no gap-free stretch of data longer than the burn-in "
+                            f"({opt.burn_in / 3600:g} h); {int(self.valid.sum())} valid rows")
+        self.segments = segs
+        n_tot = sum(b - a for a, b in segs)
+        L = 2 ** int(round(math.log2(max(math.sqrt(n_tot), 4.0))))
+        self.L = L = int(min(max(L, 8), 256))
+        chunk_seg, chunk_off = [], []
+        for s, (a, b) in enumerate(segs):
+            for o in range(0, b - a, L):
+                chunk_seg.append(s)
+                chunk_off.append(o)
+        M = len(chunk_seg)
+        self.M = M
+        self.restart = [s if o == 0 else -1 for s, o in zip(chunk_seg, chunk_off)]
+        tmap = np.full(L * M, -1, dtype=int)       # data row of each layout column
+        first = np.zeros(L * M, dtype=int)
+        for c, (s, o) in enumerate(zip(chunk_seg, chunk_off)):
+            a, b = segs[s]
+            for j in range(L):
+                t = a + o + j
+                if t < b:
+                    tmap[j * M + c] = t
+                    first[j * M + c] = a
+        self.tmap = tmap
+        live = tmap >= 0
+        use = np.zeros(L * M, dtype=bool)
+        use[live] = self.fit_rows[tmap[live]]
+        self.mask = (live & use & (tmap - first >= self.burn)).astype(float)
+        self.n_cols = int(self.mask.sum())
+        self.n_obs = self.n_cols * self.ny
+        self.pos = {int(t): k for k, t in enumerate(tmap) if t >= 0}
+
+        def lay(A):
+            out = np.zeros((A.shape[0], L * M))
+            out[:, live] = A[:, tmap[live]]
+            return out
+
+        self.W0_lay = lay(self.W0)
+        self.B_lay = lay(self.Bas)
+        self.Y_lay = lay(np.nan_to_num(self.Y.T))
+        # k-step restarts
+        H = max(1, int(round(opt.horizon / dt)))
+        stride = max(1, int(round((opt.stride or opt.horizon) / dt)))
+        self.H = H
+        ok_rows = self.fit_rows
+        starts = [t for a, b in segs for t in range(a + self.burn, b - H, stride)
+                  if ok_rows[t + 1:t + H + 1].all()]
+        self.n_restarts = len(starts)
+        self.kstarts = np.array(starts, dtype=int)
+        # steady initial state windows: the first day of every segment
+        day = max(1, int(round(86400.0 / dt)))
+        self.seg_means = []
+        for a, b in segs:
+            w = slice(a, min(b, a + day))
+            self.seg_means.append((self.Y[w].mean(axis=0), self.W0[:, w].mean(axis=1),
+                                   self.Bas[:, w].mean(axis=1), self.Y[a], self.W0[:, a]))
+
+    # ------------------------------------------------------------------ the graph
+    def _theta_net(self, eta):
+        """Network parameter vector p (MX) from eta."""
+        m = len(self.edges)
+        if not m:
+            return ca.MX(0, 1)
+        lr = ca.vertcat(*[eta[i] for i in self.i_rbar])
+        rb = ca.exp(lr)
+        cv = ca.exp(eta[self.i_tau] - lr)
+        return ca.vertcat(rb, cv)
+
+    def _continuous(self, eta):
+        n, n_net, nz = self.n, self.n_net, self.nz
+        A, Bt = self.sym.AB(self._theta_net(eta))
+        A = A - ca.DM(sp.diags(self.d_sup).tocsc())
+        inv_cz_kw = np.asarray(self.sym.inv_cz, dtype=float) / _KW     # kW → K/s
+        Sq = np.zeros((n_net, nz))
+        Sq[np.arange(nz), np.arange(nz)] = inv_cz_kw
+        B = ca.horzcat(ca.DM(Sq), Bt)
+        n_x = n_net + self.n_d          # states before the sensor-error block
+        if self.n_d:
+            E = np.zeros((n_net, self.n_d))
+            E[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
+            A = ca.vertcat(ca.horzcat(A, ca.DM(E)), ca.MX(self.n_d, n_x))
+            B = ca.vertcat(B, ca.MX(self.n_d, self.nw))
+        sq = ca.vertcat(*[ca.exp(eta[i]) for i in self.i_sq]) * ca.DM(np.asarray(self.sym.inv_cz, float))
+        diag = [sq ** 2, ca.MX(n_net - nz, 1)]
+        if self.n_d:
+            diag.append((ca.vertcat(*[ca.exp(eta[i]) for i in self.i_sphi]) * _KW) ** 2)
+        if self.n_e:
+            tau_e = ca.exp(eta[self.i_taue])
+            sig_e = ca.exp(eta[self.i_sige])
+            A = ca.blockcat([[A, ca.MX(n_x, self.n_e)],
+                             [ca.MX(self.n_e, n_x), -ca.MX.eye(self.n_e) / tau_e]])
+            B = ca.vertcat(B, ca.MX(self.n_e, self.nw))
+            diag.append(ca.repmat(2 * sig_e ** 2 / tau_e, self.n_e, 1))
+        Sig = ca.diag(ca.vertcat(*diag))
+        R = ca.diag(ca.vertcat(*[ca.exp(2 * eta[i]) for i in self.i_sv]))
+        return A, B, Sig, R
+
+    def _theta_basis(self, eta):
+        nb_rows = self.Bas.shape[0]
+        if not self.lin:
+            return ca.MX(self.nz, nb_rows)
+        S = np.zeros((self.nz * nb_rows, len(self.lin)))
+        vals = []
+        for k, (i, zi, b) in enumerate(self.lin):
+            S[zi + self.nz * b, k] = self.layout.params[i].scale
+            vals.append(eta[i])
+        return ca.reshape(ca.mtimes(ca.DM(S), ca.vertcat(*vals)), self.nz, nb_rows)
+
+    def _initial_states(self, A, B, ThB):
+        n_net, meas = self.n_net, self.meas
+        rest = [i for i in range(n_net) if i not in meas]
+        Anet = A[:n_net, :n_net]
+        Bnet = B[:n_net, :]
+        cols = []
+        for s, (a, b) in enumerate(self.segments):
+            ybar, w0bar, bbar, y_a, w_a = self.seg_means[s]
+            if self.options.initial_state == "paper":
+                Tz = np.full(self.nz, np.nan)
+                Tz[meas] = y_a
+                x = self.model.initial_state(Tz, w_a[self.nz:])
+                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e)]))
+                continue
+            wbar = ca.DM(w0bar) + ca.vertcat(_KW * ca.mtimes(ThB, ca.DM(bbar)), ca.DM.zeros(self.nb))
+            bvec = ca.mtimes(Bnet, wbar)
+            rhs = ca.mtimes(Anet[rest, meas], ca.DM(ybar)) + bvec[rest]
+            xr = -ca.solve(Anet[rest, rest], rhs)
+            PK = np.zeros((n_net, self.ny))
+            PK[meas, np.arange(self.ny)] = 1.0
+            PR = np.zeros((n_net, len(rest)))
+            PR[rest, np.arange(len(rest))] = 1.0
+            x0 = ca.mtimes(ca.DM(PK), ca.DM(y_a)) + ca.mtimes(ca.DM(PR), xr)
+            if self.n_d:
+                imb = ca.mtimes(Anet[meas, meas], ca.DM(ybar)) + ca.mtimes(Anet[meas, rest], xr) \
+                    + bvec[meas]
+                phi = -imb * ca.DM(self.cap_z[meas]) * _KW
+                x0 = ca.vertcat(x0, phi)
+            if self.n_e:
+                x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e))
+            cols.append(x0)
+        return ca.horzcat(*cols)
+
+    def _norm_bound(self):
+        """Upper bound of ‖A‖₁·dt over the parameter box (fastest corner: smallest R̄_v, τ0)."""
+        m = len(self.edges)
+        if m:
+            r = self.options.rbar_bounds[0]
+            p = np.r_[np.full(m, r), np.full(m, self.tau_bounds[0] / r)]
+        else:
+            p = np.zeros(0)
+        A, _ = self.sym.AB(p)
+        A = np.asarray(ca.densify(A)) - np.diag(self.d_sup)
+        return 1.1 * np.abs(A).sum(axis=0).max() * self.data.dt
+
+    def _build(self):
+        npar = len(self.layout)
+        eta = ca.MX.sym("eta", npar)
+        A, B, Sig, R = self._continuous(eta)
+        self.squarings = kalman.n_squarings(self._norm_bound())
+        Phi, Gam, Qd = kalman.discretize(A, B, Sig, self.data.dt, self.squarings)
+        C = np.zeros((self.ny, self.n))
+        C[np.arange(self.ny), self.meas] = 1.0
+        if self.n_e:
+            C[np.arange(self.ny), self.n - self.n_e + np.arange(self.ny)] = 1.0
+        self.C = C
+        C = ca.DM(C)
+        self._dare = None
+        if self.options.riccati == "implicit":
+            # kept on self: the CasADi graph only holds a reference to the callback
+            self._dare = kalman.DareCallback(f"dare_{id(self):x}", self.C)
+        P, S, Kf, change = kalman.stationary_filter(Phi, C, Qd, R, self.options.sda_iterations,
+                                                    self._dare)
+        ThB = self._theta_basis(eta)
+        X0 = self._initial_states(A, B, ThB)
+        PhiK = ca.mtimes(Phi, Kf)
+        F = Phi - ca.mtimes(PhiK, C)
+        ThB_full = ca.vertcat(ThB, ca.MX(self.nb, ThB.shape[1]))
+        W = ca.DM(self.W0_lay) + _KW * ca.mtimes(ThB_full, ca.DM(self.B_lay))
+        GZ = ca.mtimes(Gam, W) + ca.mtimes(PhiK, ca.DM(self.Y_lay))
+        X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L)
+        E = ca.DM(self.Y_lay) - ca.mtimes(C, X)
+        Em = E * ca.DM(np.tile(self.mask, (self.ny, 1)))
+        quad_cols = ca.sum1(Em * ca.solve(S, Em))                         # (1, L·M)
+        quad = ca.sum2(quad_cols)
+        nll = 0.5 * (quad + self.n_cols * ca.log(ca.det(S)) + self.n_obs * kalman.LOG2PI)
+        self._col_terms = 0.5 * (quad_cols + ca.DM(self.mask).T * (ca.log(ca.det(S))
+                                                                 + self.ny * kalman.LOG2PI))
+        self._eta = eta
+        self._nll = nll
+        self.nll_fn = ca.Function("nll", [eta], [nll], ["eta"], ["nll"])
+        self.nll_grad_fn = ca.Function("nll_grad", [eta], [nll, ca.gradient(nll, eta)],
+                                       ["eta"], ["nll", "grad"])
+        self.matrices_fn = ca.Function(
+            "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change],
+            ["eta"], ["A", "B", "Sigma", "R", "Phi", "Gamma", "Qd", "P", "S", "Kf", "X0",
+                      "Theta", "change"])
+        self._kstep = None
+        self._hess = {}
+        if self.n_restarts:
+            self._kstep = self._build_kstep(X, E, Kf, Phi, Gam, C, ThB_full)
+            self.kstep_fn = ca.Function("kstep", [eta], [self._kstep], ["eta"], ["J"])
+            self.kstep_grad_fn = ca.Function("kstep_grad", [eta],
+                                             [self._kstep, ca.gradient(self._kstep, eta)],
+                                             ["eta"], ["J", "grad"])
+
+    def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full):
+        LM = self.L * self.M
+        R = self.n_restarts
+        rows = np.array([self.pos[int(t)] for t in self.kstarts])
+        Sel = ca.DM(sp.csc_matrix((np.ones(R), (rows, np.arange(R))), shape=(LM, R)))
+        Xh = ca.mtimes(X, Sel) + ca.mtimes(Kf, ca.mtimes(E, Sel))
+        J = 0
+        Sz = np.zeros((self.nw, self.ny))
+        Sz[self.meas, np.arange(self.ny)] = 1.0
+        Sz = ca.DM(Sz)
+        CT = np.zeros((self.ny, self.n))
+        CT[np.arange(self.ny), self.meas] = 1.0
+        CT = ca.DM(CT)
+        for i in range(1, self.H + 1):
+            idx = self.kstarts + i - 1
+            W = ca.DM(self.W0[:, idx]) + _KW * ca.mtimes(ThB_full, ca.DM(self.Bas[:, idx]))
+            fb = ca.DM(self.sup_gain[idx].T) * (ca.mtimes(CT, Xh) - ca.DM(self.Tbar[idx].T))
+            W = W - ca.mtimes(Sz, fb)
+            Xh = ca.mtimes(Phi, Xh) + ca.mtimes(Gam, W)
+            err = ca.DM(self.Y[self.kstarts + i].T) - ca.mtimes(C, Xh)
+            J = J + ca.sumsqr(err)
+        return J
+
+    # ------------------------------------------------------------------ numeric API
+    @property
+    def n_kstep(self) -> int:
+        """Scalar errors in the k-step criterion."""
+        return self.n_restarts * self.H * self.ny
+
+    def nll(self, eta) -> float:
+        """Negative log-likelihood [-] (2π term included)."""
+        return float(self.nll_fn(np.asarray(eta, float)))
+
+    def nll_grad(self, eta):
+        f, g = self.nll_grad_fn(np.asarray(eta, float))
+        return float(f), np.asarray(g, dtype=float).ravel()
+
+    def kstep(self, eta) -> float:
+        """k-step criterion: sum of squared errors over horizons 1..H at every restart [K²]."""
+        self._need_kstep()
+        return float(self.kstep_fn(np.asarray(eta, float)))
+
+    def kstep_grad(self, eta):
+        self._need_kstep()
+        f, g = self.kstep_grad_fn(np.asarray(eta, float))
+        return float(f), np.asarray(g, dtype=float).ravel()
+
+    def _need_kstep(self):
+        if self._kstep is None:
+            raise DataError(f"no k-step restart fits in the data: every segment is shorter than "
+                            f"burn-in + horizon ({self.options.burn_in / 3600:g} h + "
+                            f"{self.options.horizon / 3600:g} h)")
+
+    def hessian(self, eta, criterion: str = "likelihood") -> np.ndarray:
+        """Exact Hessian of the criterion in ``eta`` (built on first use)."""
+        if criterion not in self._hess:
+            expr = self._nll if criterion == "likelihood" else self._kstep
+            if expr is None:
+                self._need_kstep()
+            H, _ = ca.hessian(expr, self._eta)
+            self._hess[criterion] = ca.Function(f"hess_{criterion}", [self._eta], [H])
+        H = np.asarray(ca.densify(self._hess[criterion](np.asarray(eta, float))))
+        return 0.5 * (H + H.T)
+
+    def block_scores(self, eta, block: float = 86400.0) -> np.ndarray:
+        """Gradients of the likelihood's contributions of consecutive time blocks.
+
+        Parameters
+        ----------
+        eta : array_like
+        block : float
+            Block length [s] (blocks follow the data rows from the first sample).
+
+        Returns
+        -------
+        ndarray, shape (n_blocks, n_params)
+            ``∂ nll_b / ∂ eta`` for every block with observations (they sum to the gradient).
+        """
+        if "weighted" not in self._hess:
+            # one reverse sweep per block (a Jacobian of all blocks at once would make
+            # CasADi differentiate the Riccati callback column by column)
+            wcol = ca.MX.sym("w", self.L * self.M)
+            f = ca.dot(wcol, self._col_terms.T)
+            self._hess["weighted"] = ca.Function("wnll_grad", [self._eta, wcol],
+                                                 [ca.gradient(f, self._eta)])
+        per = max(1, int(round(block / self.data.dt)))
+        bid = np.where(self.tmap >= 0, self.tmap // per, -1)
+        ids = sorted({int(b) for b, m in zip(bid, self.mask) if b >= 0 and m > 0})
+        eta = np.asarray(eta, float)
+        G = np.empty((len(ids), len(self.layout)))
+        for r, b in enumerate(ids):
+            w = ((bid == b) & (self.mask > 0)).astype(float)
+            G[r] = np.asarray(self._hess["weighted"](eta, w), dtype=float).ravel()
+        return G
+
+    def matrices(self, eta) -> dict:
+        """Every intermediate matrix at ``eta`` as numpy arrays (continuous, discrete, filter)."""
+        out = self.matrices_fn(eta=np.asarray(eta, float))
+        return {k: np.asarray(ca.densify(v)) for k, v in out.items()}
+
+    def inputs(self, eta) -> np.ndarray:
+        """Model inputs ``w`` of every row, shape (N, nz + nb): zone heat [kW], boundary T [°C]."""
+        Th = self.matrices(eta)["Theta"]
+        W = self.W0.copy()
+        W[:self.nz] += _KW * Th @ self.Bas
+        return W.T
+
+    def rbar_c(self, eta):
+        """``(rbar_v, c_v)`` per convection edge at ``eta`` ([K/(W m)], [J/K])."""
+        m = len(self.edges)
+        if not m:
+            return np.zeros(0), np.zeros(0)
+        eta = np.asarray(eta, float)
+        rb = np.exp(eta[self.i_rbar])
+        return rb, np.exp(eta[self.i_tau]) / rb
+
+    def thermal_model(self, eta, meta: dict | None = None) -> ThermalModel:
+        """The identified :class:`ThermalModel` (network part) at ``eta``."""
+        rb, cv = self.rbar_c(eta)
+        if not len(rb):
+            return ThermalModel(self.network, meta=meta)
+        if self.options.per_edge:
+            return ThermalModel(self.network, rbar_v=rb, c_v=cv, meta=meta)
+        return ThermalModel(self.network, rbar_v=float(rb[0]), c_v=float(cv[0]), meta=meta)
+
+    def describe(self) -> str:
+        return (f"{len(self.zones)} zones ({self.ny} measured), {len(self.edges)} convection "
+                f"edges, {self.n} states ({self.n_d} gain states), {len(self.layout)} parameters, "
+                f"{len(self.segments)} segment(s), {self.n_obs} observations, "
+                f"{self.n_restarts} k-step restarts of {self.H} steps, "
+                f"{self.squarings} squarings, chunks {self.L}×{self.M}")
