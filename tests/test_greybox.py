@@ -13,6 +13,7 @@ import warnings
 
 import casadi as ca
 import numpy as np
+import pandas as pd
 import pytest
 import scipy.linalg as sla
 from scipy.stats import multivariate_normal
@@ -189,12 +190,22 @@ def test_problem_likelihood_equals_time_varying_filter(sim5, net5):
     assert pb.n_obs == kr.n_obs
 
 
-@pytest.mark.parametrize("riccati", ["implicit", "doubling"])
-def test_gradient_matches_finite_differences(sim5, net5, riccati):
+@pytest.mark.parametrize("extra", [
+    {"riccati": "implicit"},
+    {"riccati": "doubling"},
+    {"measurement": "ar1", "boundary_noise": "all"},
+    {"disturbance": "none", "basis": "fourier", "harmonics": 1, "noise": "zone"},
+    {"basis": "levels", "solar": "auto"},
+])
+def test_gradient_matches_finite_differences(sim5, net5, extra):
     data, opts = sim5
-    pb = GreyboxProblem(net5, data.window(0, 600),
-                        GreyboxOptions(**{**opts.__dict__, "riccati": riccati}))
-    eta = pb.layout.eta0() + np.array([0.3, -0.2, 0.1, 0.2, -0.1])
+    data = data.window(0, 600)
+    data.time = pd.date_range("2024-01-15", periods=len(data), freq="5min", tz="UTC")
+    data.solar = np.clip(np.sin(np.arange(len(data)) * 2 * np.pi / 288), 0, None)[:, None] * 400
+    data.solar_names = ["south"]
+    pb = GreyboxProblem(net5, data, GreyboxOptions(**{**opts.__dict__, **extra}))
+    rng = np.random.default_rng(3)
+    eta = pb.layout.eta0() + rng.uniform(-0.3, 0.3, len(pb.layout))
     f, g = pb.nll_grad(eta)
     for i in range(len(eta)):
         h = 1e-5
@@ -204,6 +215,8 @@ def test_gradient_matches_finite_differences(sim5, net5, riccati):
         fd = (pb.nll(ep) - pb.nll(em)) / (2 * h)
         # FD truncation ~h²·f''' and cancellation ~1e-16·|f|/h: 1e-5 relative is safe
         assert g[i] == pytest.approx(fd, rel=1e-5, abs=1e-6 * abs(f)), pb.layout.names[i]
+    if "solar" in extra:
+        assert any(n.startswith("aperture[") for n in pb.layout.names)
     fk, gk = pb.kstep_grad(eta)
     i = pb.layout.index("rbar_v")
     ep, em = eta.copy(), eta.copy()
@@ -252,6 +265,22 @@ def test_wald_intervals_and_c_v_verdict(sim5, net5):
     free = est.problem_.layout.free()
     H = hessian_fd(est.problem_, est.eta_, free)
     assert np.all(np.isfinite(H)) and H[0, 0] > 0
+
+
+def test_profile_interval_agrees_with_wald(sim5, net5):
+    from thermctl.greybox.uncertainty import profile_likelihood
+    data, opts = sim5
+    est = GreyboxEstimator(net5, options=opts).fit(data)
+    wald, _ = wald_intervals(est.problem_, est.eta_, 0.9, robust=False)
+    prof = profile_likelihood(est.problem_, est.eta_, "rbar_v", 0.9, nll_hat=est.nll_)
+    assert prof.identifiable
+    assert prof.lower < est.rbar_v_ < prof.upper
+    # the model is exactly right here: the likelihood is close to quadratic in log rbar_v,
+    # so the two intervals agree to within the profile's curvature change (~15 %)
+    w = np.log(wald["rbar_v"].upper / wald["rbar_v"].lower)
+    p = np.log(prof.upper / prof.lower)
+    assert p == pytest.approx(w, rel=0.15)
+    assert np.all(prof.profile >= -1e-6)         # the optimum is the optimum
 
 
 def test_kstep_errors_grow_with_horizon(sim5, net5):

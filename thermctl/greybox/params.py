@@ -22,6 +22,8 @@ GROUP_UNITS = {
     "sigma_q": "W s^0.5",
     "sigma_phi": "W/s^0.5",
     "sigma_e": "K",
+    "sigma_b": "K",
+    "tau_b": "s",
     "tau_e": "s",
     "aperture": "m²",
     "gain": "W",

@@ -31,146 +31,24 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import DataError, EstimationError
-from ..model import C_V_PAPER, RBAR_V_PAPER, ThermalModel
+from ..model import RBAR_V_PAPER, ThermalModel
 from ..network import ThermalNetwork
 from . import kalman
 from .data import GreyboxData
+from .options import _OUTDOOR, RBAR_BOUNDS, T_MAX, T_MIN, GreyboxOptions
 from .params import Param, ParamLayout
 
 __all__ = ["GreyboxOptions", "GreyboxProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
 
 log = logging.getLogger(__name__)
 
-T_MIN, T_MAX = 4.0, 20.0        # [s/m], the paper's range of convective time constants per metre
-RBAR_BOUNDS = (1e-6, 1e-2)      # [K/(W m)], the paper's search range
 _KW = 1e-3                      # gains and heat inputs are in kW inside: states O(0.1–1)
-
-
-@dataclass(frozen=True)
-class GreyboxOptions:
-    """Model and criterion options of :class:`GreyboxProblem`.
-
-    Attributes
-    ----------
-    per_edge : bool
-        One R̄_v per convection edge (τ0 stays shared) instead of one for all.
-    disturbance : {"random_walk", "none"}
-        Random-walk gain state per measured zone, or none (white heat noise only).
-    unmeasured_gain : bool
-        Unmeasured zones (a hallway) get the time-of-day basis too (and a constant without
-        random walk). Their temperature is only seen through their neighbours, so no
-        random walk there (it would not be detectable); a constant alone would be
-        indistinguishable from shifted gains of the measured zones.
-    basis : {None, "levels", "fourier"}
-        Deterministic time-of-day part of the gains of each measured zone: ``levels`` =
-        an occupied-hours indicator, ``fourier`` = ``harmonics`` daily harmonics. Without
-        the random walk every measured zone also gets a constant gain.
-    harmonics : int
-    occupied_hours : (float, float)
-        Local hours of the ``levels`` indicator [h].
-    weekdays_only : bool
-        ``levels`` indicator on Monday–Friday only.
-    solar : "auto", bool or list of str
-        Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
-        those zones; False = none.
-    noise : {"shared", "zone"}
-        One σ_q, σ_φ, σ_v for all zones, or one per zone.
-    burn_in : float
-        Time at the start of every data segment left out of the likelihood and the k-step
-        restarts (the filter still runs through it) [s].
-    initial_state : {"steady", "paper"}
-        ``steady``: zones at their first sample, all other states at the steady state of
-        the first day's mean inputs, gains at that day's mean imbalance (depends on θ);
-        ``paper``: the paper's mean-of-ends start, zero gains.
-    supply_temperature : {"midpoint", "start"}
-        Zone temperature used in the supply heat of a step: mean of the bracketing
-        samples, or the sample at its start (causal).
-    horizon : float
-        Horizon of the k-step criterion [s].
-    stride : float or None
-        Spacing of the k-step restarts [s] (default: the horizon).
-    rbar_bounds : (float, float)
-        [K/(W m)]
-    t_min, t_max : float
-        Convective time constant per unit distance [s/m] (paper: 4 and 20).
-    alpha : float or None
-        Default: the spec's (median of its walls).
-    sda_iterations : int
-        Doubling iterations of the stationary Riccati solution in the graph.
-    riccati : {"implicit", "doubling"}
-        ``implicit``: the stationary Riccati equation is solved in numpy and differentiated
-        through its adjoint Stein equation (fast; second derivatives by finite differences
-        of that exact adjoint). ``doubling``: ``sda_iterations`` doubling steps inside the
-        CasADi graph (exact derivatives of every order, ~3× slower).
-    measurement : {"white", "ar1"}
-        Sensor error model: white, or white plus a first-order autoregressive error per
-        measured zone (``σ_e``, ``τ_e``) — what quantisation of a slowly moving
-        temperature looks like (a 0.1 °F step is crossed only every few samples).
-    fit_rows : "auto", "all", "supply_off" or array of bool
-        Rows whose one-step innovations enter the likelihood and whose horizons the k-step
-        restarts may cover; the filter runs through all rows either way. ``supply_off``:
-        only samples after ``holdoff`` without supply air in any zone (nights, weekends);
-        ``auto``: ``supply_off`` if that leaves at least 15 % of the samples and a day,
-        else ``all``. Why: a zone controller acts on readings the log
-        does not hold (between samples, before rounding), so in closed loop the logged
-        supply carries information about the state the filter cannot see, which biases
-        the likelihood toward strong mixing; with the supply off the inputs are exact.
-    holdoff : float
-        With ``fit_rows="supply_off"``: time after the supply went off before samples
-        count [s].
-    """
-
-    per_edge: bool = False
-    disturbance: str = "random_walk"
-    unmeasured_gain: bool = True
-    basis: str | None = None
-    harmonics: int = 2
-    occupied_hours: tuple = (7.0, 19.0)
-    weekdays_only: bool = True
-    solar: object = "auto"
-    noise: str = "shared"
-    burn_in: float = 6 * 3600.0
-    initial_state: str = "steady"
-    supply_temperature: str = "midpoint"
-    horizon: float = 3600.0
-    stride: float | None = None
-    rbar_bounds: tuple = RBAR_BOUNDS
-    t_min: float = T_MIN
-    t_max: float = T_MAX
-    alpha: float | None = None
-    sda_iterations: int = 30
-    riccati: str = "implicit"
-    measurement: str = "white"
-    fit_rows: object = "auto"
-    holdoff: float = 3 * 3600.0
-
-    def check(self):
-        if self.riccati not in ("implicit", "doubling"):
-            raise EstimationError(f"riccati must be 'implicit' or 'doubling', found {self.riccati!r}")
-        if self.measurement not in ("white", "ar1"):
-            raise EstimationError(f"measurement must be 'white' or 'ar1', found {self.measurement!r}")
-        if self.disturbance not in ("random_walk", "none"):
-            raise EstimationError(f"disturbance must be 'random_walk' or 'none', found "
-                                  f"{self.disturbance!r}")
-        if self.basis not in (None, "levels", "fourier"):
-            raise EstimationError(f"basis must be None, 'levels' or 'fourier', found {self.basis!r}")
-        if self.noise not in ("shared", "zone"):
-            raise EstimationError(f"noise must be 'shared' or 'zone', found {self.noise!r}")
-        if self.initial_state not in ("steady", "paper"):
-            raise EstimationError(f"initial_state must be 'steady' or 'paper', found "
-                                  f"{self.initial_state!r}")
-        if self.supply_temperature not in ("midpoint", "start"):
-            raise EstimationError("supply_temperature must be 'midpoint' or 'start', found "
-                                  f"{self.supply_temperature!r}")
-        if not 0 < self.t_min < self.t_max:
-            raise EstimationError(f"need 0 < t_min < t_max [s/m], found {self.t_min}, {self.t_max}")
 
 
 class GreyboxProblem:
@@ -221,7 +99,9 @@ class GreyboxProblem:
             raise DataError("no measured zone temperature in the data")
         self.n_d = self.ny if opt.disturbance == "random_walk" else 0
         self.n_e = self.ny if opt.measurement == "ar1" else 0
-        self.n = self.n_net + self.n_d + self.n_e
+        self.bnoise = self._boundary_noise_nodes()
+        self.n_b = len(self.bnoise)
+        self.n = self.n_net + self.n_d + self.n_e + self.n_b
         self.nw = self.nz + self.nb
         self.edges = net.convection_edges
         self.alpha = float(opt.alpha if opt.alpha is not None else net.spec.alpha())
@@ -280,6 +160,20 @@ class GreyboxProblem:
         self.basis_rows = names
         self.Bas = np.vstack(rows) if rows else np.zeros((0, N))
         self.Y = Y
+
+    def _boundary_noise_nodes(self):
+        rule = self.options.boundary_noise
+        bnd = list(self.network.boundary)
+        if rule is None or rule is False:
+            return []
+        if rule == "all":
+            return list(range(len(bnd)))
+        if rule == "outdoor":
+            return [j for j, b in enumerate(bnd) if b.lower() in _OUTDOOR]
+        bad = [b for b in rule if b not in bnd]
+        if bad:
+            raise EstimationError(f"boundary_noise: {bad} are not boundary nodes ({bnd})")
+        return [bnd.index(b) for b in rule]
 
     def _fit_rows(self, ms):
         """Rows whose innovations enter the likelihood (see ``GreyboxOptions.fit_rows``)."""
@@ -346,7 +240,7 @@ class GreyboxProblem:
             h0, h1 = opt.occupied_hours
             occ = (hour >= h0) & (hour < h1)
             if opt.weekdays_only:
-                occ &= np.asarray(t.dayofweek < 5)
+                occ &= np.asarray(t.day_of_week < 5)
             out.append(("occupied", occ.astype(float), zones))
         else:
             for k in range(1, opt.harmonics + 1):
@@ -392,6 +286,9 @@ class GreyboxProblem:
             else:
                 self.i_sphi = [lay.add(Param(f"sigma_phi[{z}]", "sigma_phi", True, s0, 1e-3, 1e3))
                                for z in mz]
+        if self.n_b:
+            self.i_sigb = lay.add(Param("sigma_b", "sigma_b", True, 0.2, 1e-3, 5.0))
+            self.i_taub = lay.add(Param("tau_b", "tau_b", True, 3600.0, 300.0, 86400.0))
         if self.n_e:
             self.i_sige = lay.add(Param("sigma_e", "sigma_e", True, 0.015, 1e-4, 1.0))
             self.i_taue = lay.add(Param("tau_e", "tau_e", True, 1800.0, 60.0, 86400.0))
@@ -518,6 +415,16 @@ class GreyboxProblem:
                              [ca.MX(self.n_e, n_x), -ca.MX.eye(self.n_e) / tau_e]])
             B = ca.vertcat(B, ca.MX(self.n_e, self.nw))
             diag.append(ca.repmat(2 * sig_e ** 2 / tau_e, self.n_e, 1))
+        if self.n_b:
+            # boundary temperature error b: the walls see T_b + b (sensor placement, sun
+            # on the facade, gusts): a disturbance common to every zone on that boundary
+            n_y = n_x + self.n_e
+            tau_b = ca.exp(eta[self.i_taub])
+            sig_b = ca.exp(eta[self.i_sigb])
+            Eb = ca.vertcat(Bt[:, self.bnoise], ca.MX(n_y - n_net, self.n_b))
+            A = ca.blockcat([[A, Eb], [ca.MX(self.n_b, n_y), -ca.MX.eye(self.n_b) / tau_b]])
+            B = ca.vertcat(B, ca.MX(self.n_b, self.nw))
+            diag.append(ca.repmat(2 * sig_b ** 2 / tau_b, self.n_b, 1))
         Sig = ca.diag(ca.vertcat(*diag))
         R = ca.diag(ca.vertcat(*[ca.exp(2 * eta[i]) for i in self.i_sv]))
         return A, B, Sig, R
@@ -545,7 +452,7 @@ class GreyboxProblem:
                 Tz = np.full(self.nz, np.nan)
                 Tz[meas] = y_a
                 x = self.model.initial_state(Tz, w_a[self.nz:])
-                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e)]))
+                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e + self.n_b)]))
                 continue
             wbar = ca.DM(w0bar) + ca.vertcat(_KW * ca.mtimes(ThB, ca.DM(bbar)), ca.DM.zeros(self.nb))
             bvec = ca.mtimes(Bnet, wbar)
@@ -561,8 +468,8 @@ class GreyboxProblem:
                     + bvec[meas]
                 phi = -imb * ca.DM(self.cap_z[meas]) * _KW
                 x0 = ca.vertcat(x0, phi)
-            if self.n_e:
-                x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e))
+            if self.n_e + self.n_b:
+                x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e + self.n_b))
             cols.append(x0)
         return ca.horzcat(*cols)
 
@@ -587,7 +494,7 @@ class GreyboxProblem:
         C = np.zeros((self.ny, self.n))
         C[np.arange(self.ny), self.meas] = 1.0
         if self.n_e:
-            C[np.arange(self.ny), self.n - self.n_e + np.arange(self.ny)] = 1.0
+            C[np.arange(self.ny), self.n_net + self.n_d + np.arange(self.ny)] = 1.0
         self.C = C
         C = ca.DM(C)
         self._dare = None

@@ -34,7 +34,6 @@ import numpy as np
 
 from ..errors import BoundWarning, ConvergenceWarning, EstimationError, SpecError
 from ..network import ThermalNetwork
-from .data import GreyboxData
 from .estimator import GreyboxEstimator, as_greybox_data
 from .kalman import single_thread
 

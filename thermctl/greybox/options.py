@@ -1,0 +1,139 @@
+"""Options of the stochastic grey-box model and its criteria (:class:`GreyboxOptions`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..errors import EstimationError
+
+__all__ = ["GreyboxOptions", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
+
+T_MIN, T_MAX = 4.0, 20.0        # [s/m], the paper's range of convective time constants per metre
+RBAR_BOUNDS = (1e-6, 1e-2)      # [K/(W m)], the paper's search range
+_OUTDOOR = ("outside", "outdoor", "outdoors", "ambient", "out", "exterior")
+
+
+@dataclass(frozen=True)
+class GreyboxOptions:
+    """Model and criterion options of :class:`GreyboxProblem`.
+
+    Attributes
+    ----------
+    per_edge : bool
+        One R̄_v per convection edge (τ0 stays shared) instead of one for all.
+    disturbance : {"random_walk", "none"}
+        Random-walk gain state per measured zone, or none (white heat noise only).
+    unmeasured_gain : bool
+        Unmeasured zones (a hallway) get the time-of-day basis too (and a constant without
+        random walk). Their temperature is only seen through their neighbours, so no
+        random walk there (it would not be detectable); a constant alone would be
+        indistinguishable from shifted gains of the measured zones.
+    basis : {None, "levels", "fourier"}
+        Deterministic time-of-day part of the gains of each measured zone: ``levels`` =
+        an occupied-hours indicator, ``fourier`` = ``harmonics`` daily harmonics. Without
+        the random walk every measured zone also gets a constant gain.
+    harmonics : int
+    occupied_hours : (float, float)
+        Local hours of the ``levels`` indicator [h].
+    weekdays_only : bool
+        ``levels`` indicator on Monday–Friday only.
+    solar : "auto", bool or list of str
+        Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
+        those zones; False = none.
+    noise : {"shared", "zone"}
+        One σ_q, σ_φ, σ_v for all zones, or one per zone.
+    burn_in : float
+        Time at the start of every data segment left out of the likelihood and the k-step
+        restarts (the filter still runs through it) [s].
+    initial_state : {"steady", "paper"}
+        ``steady``: zones at their first sample, all other states at the steady state of
+        the first day's mean inputs, gains at that day's mean imbalance (depends on θ);
+        ``paper``: the paper's mean-of-ends start, zero gains.
+    supply_temperature : {"midpoint", "start"}
+        Zone temperature used in the supply heat of a step: mean of the bracketing
+        samples, or the sample at its start (causal).
+    horizon : float
+        Horizon of the k-step criterion [s].
+    stride : float or None
+        Spacing of the k-step restarts [s] (default: the horizon).
+    rbar_bounds : (float, float)
+        [K/(W m)]
+    t_min, t_max : float
+        Convective time constant per unit distance [s/m] (paper: 4 and 20).
+    alpha : float or None
+        Default: the spec's (median of its walls).
+    sda_iterations : int
+        Doubling iterations of the stationary Riccati solution in the graph.
+    riccati : {"implicit", "doubling"}
+        ``implicit``: the stationary Riccati equation is solved in numpy and differentiated
+        through its adjoint Stein equation (fast; second derivatives by finite differences
+        of that exact adjoint). ``doubling``: ``sda_iterations`` doubling steps inside the
+        CasADi graph (exact derivatives of every order, ~3× slower).
+    measurement : {"white", "ar1"}
+        Sensor error model: white, or white plus a first-order autoregressive error per
+        measured zone (``σ_e``, ``τ_e``) — what quantisation of a slowly moving
+        temperature looks like (a 0.1 °F step is crossed only every few samples).
+    boundary_noise : None, "outdoor", "all" or list of str
+        A first-order autoregressive error (``σ_b``, ``τ_b``, shared) on these boundary
+        temperatures: what the walls see differs from the logged value (a station away
+        from the facade, sun on the wall, gusts). The error is common to every zone on
+        that boundary, so without it the fit may explain it as mixing between zones.
+    fit_rows : "auto", "all", "supply_off" or array of bool
+        Rows whose one-step innovations enter the likelihood and whose horizons the k-step
+        restarts may cover; the filter runs through all rows either way. ``supply_off``:
+        only samples after ``holdoff`` without supply air in any zone (nights, weekends);
+        ``auto``: ``supply_off`` if that leaves at least 15 % of the samples and a day,
+        else ``all``. Why: a zone controller acts on readings the log
+        does not hold (between samples, before rounding), so in closed loop the logged
+        supply carries information about the state the filter cannot see, which biases
+        the likelihood toward strong mixing; with the supply off the inputs are exact.
+    holdoff : float
+        With ``fit_rows="supply_off"``: time after the supply went off before samples
+        count [s].
+    """
+
+    per_edge: bool = False
+    disturbance: str = "random_walk"
+    unmeasured_gain: bool = True
+    basis: str | None = None
+    harmonics: int = 2
+    occupied_hours: tuple = (7.0, 19.0)
+    weekdays_only: bool = True
+    solar: object = "auto"
+    noise: str = "shared"
+    burn_in: float = 6 * 3600.0
+    initial_state: str = "steady"
+    supply_temperature: str = "midpoint"
+    horizon: float = 3600.0
+    stride: float | None = None
+    rbar_bounds: tuple = RBAR_BOUNDS
+    t_min: float = T_MIN
+    t_max: float = T_MAX
+    alpha: float | None = None
+    sda_iterations: int = 30
+    riccati: str = "implicit"
+    measurement: str = "white"
+    boundary_noise: object = None
+    fit_rows: object = "auto"
+    holdoff: float = 3 * 3600.0
+
+    def check(self):
+        if self.riccati not in ("implicit", "doubling"):
+            raise EstimationError(f"riccati must be 'implicit' or 'doubling', found {self.riccati!r}")
+        if self.measurement not in ("white", "ar1"):
+            raise EstimationError(f"measurement must be 'white' or 'ar1', found {self.measurement!r}")
+        if self.disturbance not in ("random_walk", "none"):
+            raise EstimationError(f"disturbance must be 'random_walk' or 'none', found "
+                                  f"{self.disturbance!r}")
+        if self.basis not in (None, "levels", "fourier"):
+            raise EstimationError(f"basis must be None, 'levels' or 'fourier', found {self.basis!r}")
+        if self.noise not in ("shared", "zone"):
+            raise EstimationError(f"noise must be 'shared' or 'zone', found {self.noise!r}")
+        if self.initial_state not in ("steady", "paper"):
+            raise EstimationError(f"initial_state must be 'steady' or 'paper', found "
+                                  f"{self.initial_state!r}")
+        if self.supply_temperature not in ("midpoint", "start"):
+            raise EstimationError("supply_temperature must be 'midpoint' or 'start', found "
+                                  f"{self.supply_temperature!r}")
+        if not 0 < self.t_min < self.t_max:
+            raise EstimationError(f"need 0 < t_min < t_max [s/m], found {self.t_min}, {self.t_max}")
