@@ -354,3 +354,15 @@ def test_recovery_on_testbed_pugh_hall():
     assert est.problem_.fit_rule == "supply_off"
     # measured over seeds in benchmarks/identification.py: median error ~10 %
     assert est.rbar_v_ == pytest.approx(tb.truth.rbar_v, rel=0.25)
+
+
+@pytest.mark.slow
+def test_sin_then_likelihood_selection_on_testbed():
+    """SIN proposes (walls allowed), backward elimination by BIC keeps the true paths."""
+    from thermctl.testbed import generate
+    tb = generate("pugh-hall", days=14, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = select_edges(tb.spec, tb.data, candidates="sin", direction="backward")
+    assert {e[:2] for e in res.edges} == {tuple(sorted(e[:2])) for e in tb.truth.edges}
+    assert res.estimator.rbar_v_ == pytest.approx(tb.truth.rbar_v, rel=0.25)

@@ -26,6 +26,9 @@ Why the functions below look the way they do:
   :func:`dare_sda` computes by the structure-preserving doubling algorithm in a few
   dozen n³ operations per parameter value. The likelihood with ``P_0 = P_∞`` is then
   *exact* and its recursion is linear in the data (:func:`chunked_recursion`).
+* :class:`DareCallback` solves the same Riccati equation in numpy and gives CasADi its
+  exact reverse derivative through the adjoint Stein equation (≈3× faster than the
+  doubling graph for 60 states; used by default).
 * :func:`kalman_filter` is the plain time-varying filter (Joseph form, missing outputs
   dropped row by row) in numpy: the reference for tests and for diagnostics.
 """

@@ -21,6 +21,10 @@ once per parameter value (see :mod:`.kalman`). The error is the sensor error tim
 An unmeasured zone keeps the bilinear term at its mean flow in ``A``; the deviation
 from it is applied to the mean measured temperature (exact when it has no supply air).
 
+Which samples count (``GreyboxOptions.fit_rows``): by default only those after 3 h with
+no supply air anywhere — in closed loop the logged supply depends on readings the log
+does not hold, which biases the likelihood (see :class:`.GreyboxOptions`).
+
 Parameters (:mod:`.params`): R̄_v (shared or per edge), τ0 = R̄_v·C_v (its bounds are the
 paper's :math:`t_{min}/\alpha \le \tau_0 \le t_{max}/\alpha`), noise intensities σ_v, σ_q,
 σ_φ, solar apertures on measured ``solar:`` columns, and coefficients of a time-of-day

@@ -37,8 +37,8 @@ from ..network import ThermalNetwork
 from .estimator import GreyboxEstimator, as_greybox_data
 from .kalman import single_thread
 
-__all__ = ["Candidate", "SelectionStep", "SelectionResult", "candidate_pairs", "select_edges",
-           "CRITERIA"]
+__all__ = ["Candidate", "SelectionStep", "SelectionResult", "candidate_pairs", "sin_candidates",
+           "select_edges", "CRITERIA"]
 
 log = logging.getLogger(__name__)
 
@@ -248,7 +248,32 @@ class _Searcher:
         return 2.0 * est.score(self.test) * est.problem_for(self.test).n_obs
 
 
-def select_edges(spec, data, *, candidates=None, criterion: str = "bic", direction: str = "both",
+def sin_candidates(spec, data, level: float = 0.05, allow_parallel: bool = True) -> list:
+    """Pairs picked by the paper's SIN scores (argmax ∪ threshold rule, walls allowed).
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+    data : pandas.DataFrame or thermctl.data.Measurements
+    level : float
+        SIN significance level.
+    allow_parallel : bool
+        Let SIN propose pairs joined by a wall too.
+    """
+    from ..structure import StructureIdentifier
+    frame = getattr(data, "frame", data)
+    if not hasattr(frame, "columns"):
+        raise EstimationError("candidates='sin' needs the data as a DataFrame or Measurements")
+    net = ThermalNetwork(spec, ())
+    out = set()
+    for rule in ("paper", "threshold"):
+        sid = StructureIdentifier(level=level, rule=rule,
+                                  allow_parallel=allow_parallel).fit(frame, net)
+        out |= {tuple(sorted((e.a, e.b))) for e in sid.edges_}
+    return [_cand(spec, p) for p in sorted(out)]
+
+
+def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direction: str = "both",
                  start=(), max_edges: int | None = None, holdout: float = 0.3,
                  final_per_edge: bool = False, max_iter: int = 200, margin: float = 10.0,
                  screen: str = "grid", progress=None, **estimator_kwargs) -> SelectionResult:
@@ -259,8 +284,13 @@ def select_edges(spec, data, *, candidates=None, criterion: str = "bic", directi
     spec : BuildingSpec
         Walls and air-path distances (no convection edges needed).
     data : GreyboxData, Measurements or DataFrame
-    candidates : list of Candidate or (a, b[, d]), optional
-        Default: :func:`candidate_pairs` (all pairs with a distance, walls or not).
+    candidates : "all", "sin" or list of Candidate / (a, b[, d])
+        ``all`` (default): :func:`candidate_pairs` (every pair with a distance, walls or
+        not). ``sin``: the union of the paper's SIN picks (argmax and threshold rules,
+        :class:`thermctl.structure.StructureIdentifier`, walls allowed) — with
+        ``direction="backward"`` the likelihood then prunes what SIN proposed; measured on
+        the testbed family this gives the fewest false edges (see
+        ``benchmarks/identification.py``). Needs a DataFrame or ``Measurements``.
     criterion : {"bic", "aic", "holdout"}
         ``holdout``: fit on the first ``1 − holdout`` of the data, judge by the
         likelihood of the rest.
@@ -303,6 +333,10 @@ def select_edges(spec, data, *, candidates=None, criterion: str = "bic", directi
     if direction not in ("forward", "backward", "both"):
         raise EstimationError(f"direction must be 'forward', 'backward' or 'both', found {direction!r}")
     t0 = time.perf_counter()
+    if isinstance(candidates, str) and candidates == "sin":
+        candidates = sin_candidates(spec, data)
+    elif isinstance(candidates, str) and candidates == "all":
+        candidates = None
     cands = _candidates(spec, candidates)
     by_name = {c.name: c for c in cands}
     S = _Searcher(spec, data, criterion, holdout, estimator_kwargs, max_iter)
