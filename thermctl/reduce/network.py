@@ -96,18 +96,11 @@ class ReducedNetwork:
     def n_zones(self) -> int:
         return len(self.zones)
 
-    @property
-    def n_inputs(self) -> int:
-        return 3 * len(self.zones) + len(self.boundary)
-
-    @property
-    def input_names(self) -> list[str]:
-        return ([f"ms[{z}]" for z in self.zones] + [f"Ts[{z}]" for z in self.zones]
-                + [f"T[{b}]" for b in self.boundary] + [f"Q[{z}]" for z in self.zones])
-
-    @property
-    def output_names(self) -> list[str]:
-        return [f"T[{z}]" for z in self.zones]
+    # the same naming conventions, from the one place that defines them (they read only
+    # `zones` and `boundary`)
+    n_inputs = ThermalNetwork.n_inputs
+    input_names = ThermalNetwork.input_names
+    output_names = ThermalNetwork.output_names
 
     @property
     def network(self) -> "ReducedNetwork":
