@@ -447,6 +447,9 @@ def example_parser(description: str) -> argparse.ArgumentParser:
     p.add_argument("--model", default="identified",
                    help="the MPC's internal model(s), comma-separated: identified, true, "
                         "conduction-only (e.g. identified,true for the cost of model error)")
+    p.add_argument("--order", type=int, default=None,
+                   help="reduce the MPC's model to this many states (structure-preserving: "
+                        "zone temperatures stay states); default: the full model")
     p.add_argument("--zones", type=int, default=7,
                    help="7: Pugh Hall section; more: testbed corridor floor of about this size")
     p.add_argument("--seed", type=int, default=0, help="testbed seed")

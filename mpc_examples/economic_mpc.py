@@ -196,15 +196,14 @@ class EconomicMPC:
         Ts_all = ca.DM(Ssel) @ TS + ca.DM(rest) @ TC           # unsupplied: irrelevant (ms = 0)
         U = ca.vertcat(ms_all, Ts_all, TB, QG)
 
-        p = self.model.p
         if implicit:
             res = self._implicit_residual()
             rep = ca.DM(np.kron(np.eye(N), np.ones((1, s))))
             gaps = res.map(N * s)(X[:, :-1], X[:, 1:], U @ rep)
             Xk = X[:, ::s]
         else:
-            F = self.model.to_casadi(substeps=s).F
-            gaps = X[:, 1:] - F.map(N)(X[:, :-1], U, p, self.dt)
+            _, F = _dynamics(self.model, s)
+            gaps = X[:, 1:] - F.map(N)(X[:, :-1], U, self.dt)
             Xk = X
         T_sup = Xk[self.sup.tolist(), :-1] if ns else ca.DM(0, N)
         rep_ns = lambda v: ca.repmat(v, ns, 1)  # noqa: E731
@@ -236,28 +235,29 @@ class EconomicMPC:
         self._ubg = np.concatenate([np.zeros(n_eq), np.full(2 * nc * N, np.inf)])
         self.n_variables, self.n_constraints = int(wv.numel()), int(gv.numel())
         nlp = {"x": wv, "p": pv, "f": J, "g": gv}
-        # One solver, warm-start options: IPOPT keeps the shifted primal-dual point only with
-        # a small barrier parameter. mu_init 1e-3 with equally small bound pushes took 6-22
-        # iterations per closed-loop step on the 7-zone testbed (1e-4 / 1e-6: 5-73; IPOPT's
-        # cold defaults: 14-27); the one cold start per run takes ~30 % more iterations than
-        # with the defaults, which is cheaper than building a second solver.
-        opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-                "ipopt.tol": 1e-6, "ipopt.max_iter": self.max_iter,
-                "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3,
-                "ipopt.warm_start_bound_push": 1e-3, "ipopt.warm_start_slack_bound_push": 1e-3,
-                "ipopt.warm_start_mult_bound_push": 1e-3}
-        self._solver = ca.nlpsol("economic_mpc", "ipopt", nlp, opts)
+        base = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
+                "ipopt.tol": 1e-6, "ipopt.max_iter": self.max_iter}
+        # Warm start: IPOPT keeps the shifted primal-dual point only with a small barrier
+        # parameter. mu_init 1e-3 with equally small bound pushes took 6-22 iterations per
+        # closed-loop step on the 7-zone testbed (1e-4 / 1e-6: 5-73; IPOPT's defaults:
+        # 14-27). The first solve has no duals: IPOPT's defaults there (the warm options from
+        # a cold guess took 4× the iterations with the identified model).
+        warm = dict(base, **{"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3,
+                             "ipopt.warm_start_bound_push": 1e-3,
+                             "ipopt.warm_start_slack_bound_push": 1e-3,
+                             "ipopt.warm_start_mult_bound_push": 1e-3})
+        self._cold = ca.nlpsol("economic_mpc_cold", "ipopt", nlp, base)
+        self._warm = ca.nlpsol("economic_mpc", "ipopt", nlp, warm)
         self._diag = ca.Function("diag", [wv, pv], [energy, comfort, move],
                                  ["w", "p"], ["energy", "comfort", "move"])
 
     def _implicit_residual(self) -> ca.Function:
         """``G(xa, xb, u)``: ``D xb − N xa − c`` of one Radau sub-step, from ``f`` only."""
-        cm = self.model.to_casadi()
+        f, _ = _dynamics(self.model, 1)
         nx, nu = self.model.network.n_states, self.model.network.n_inputs
         xa, xb, u = ca.SX.sym("xa", nx), ca.SX.sym("xb", nx), ca.SX.sym("u", nu)
-        p = ca.DM(self.model.p)
-        b = cm.f(ca.DM.zeros(nx), u, p)
-        Au = lambda v: cm.f(v, u, p) - b  # noqa: E731  (f is affine in x: A_u v = f(v) − f(0))
+        b = f(ca.DM.zeros(nx), u)
+        Au = lambda v: f(v, u) - b  # noqa: E731  (f is affine in x: A_u v = f(v) − f(0))
         h = self.dt / self.s
         r = (xb - (2 * h / 3) * Au(xb) + (h * h / 6) * Au(Au(xb))
              - xa - (h / 3) * Au(xa) - h * (b - (h / 6) * Au(b)))
@@ -285,15 +285,31 @@ class EconomicMPC:
         return lb, ub
 
     def _cold_guess(self, x0, fc: Forecast):
-        wb, hv = self._wb, self.hvac
+        """A dynamically consistent first guess: the mode's minimum flow at 20 °C supply,
+        simulated with the model (zero shooting gaps), slacks and coil split to match."""
+        wb, hv, N, s = self._wb, self.hvac, self.N, self.s
+        net = self.model.network
+        frac = (np.asarray(hv.ms_min, float)[self.sup] / np.asarray(hv.ms_max, float)[self.sup])
+        phi = frac[:, None] * np.asarray(fc.hvac_on[:N], float)[None, :]
+        Ts = np.full((len(self.sup), N), 20.0)
+        ms_all = np.zeros((N, net.n_zones))
+        ms_all[:, self.sup] = (phi * np.asarray(hv.ms_max, float)[self.sup, None]).T
+        Ts_all = np.full((N, net.n_zones), 20.0)
+        U = np.column_stack([ms_all, Ts_all, fc.T_boundary[:N], fc.gains[:N]])
+        nodes = s if self.transcription == "implicit" else 1
+        X = self.model.simulate(np.repeat(U, nodes, axis=0), self.dt / nodes, x0, method="exact")
+        Xk = X[::nodes]
+        Tc = Xk[1:, self.comfort_idx].T
+        T_sup = Xk[:-1, self.sup].T
+        coil = hv.coil_duty(ms_all[:, self.sup], T_sup.T, fc.T_out[:N], fc.T_c[:N]) / 1e3
         v = np.zeros(wb.size)
-        o, r, c = wb.offsets["X"]
-        v[o:o + r * c] = np.tile(x0, c)
-        frac_min = np.asarray(hv.ms_min, float)[self.sup] / np.asarray(hv.ms_max, float)[self.sup]
-        o, r, c = wb.offsets["phi"]
-        v[o:o + r * c] = np.repeat(frac_min, 1)[:, None].repeat(c, axis=1).ravel(order="F")
-        o, r, c = wb.offsets["Ts"]
-        v[o:o + r * c] = np.full(r * c, 20.0)
+        for name, val in (("X", X.T), ("phi", phi), ("Ts", Ts),
+                          ("s_lo", np.maximum(fc.lo[None, :N] - Tc, 0.0)),
+                          ("s_hi", np.maximum(Tc - fc.hi[None, :N], 0.0)),
+                          ("q_cool", np.maximum(coil, 0.0)[None, :]),
+                          ("q_preheat", np.maximum(-coil, 0.0)[None, :])):
+            o, r, c = wb.offsets[name]
+            v[o:o + r * c] = np.asarray(val, float).ravel(order="F")
         return v
 
     def parameters(self, x0, fc: Forecast, u_prev=None) -> np.ndarray:
@@ -334,21 +350,21 @@ class EconomicMPC:
         P = self.parameters(x0, fc, u_prev)
         lbx, ubx = self._bounds(fc)
         cold = dict(x0=self._cold_guess(np.asarray(x0, float), fc))
-        if warm and prev is not None:
-            args = dict(x0=np.clip(self._wb.shift(prev["x"]), lbx, ubx),
-                        lam_x0=self._wb.shift(prev["lam_x"]), lam_g0=self._gb.shift(prev["lam_g"]))
-        else:
-            args = cold
         t0, c0 = time.perf_counter(), time.process_time()
-        r = self._solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, **args)
-        st = self._solver.stats()
+        if warm and prev is not None:
+            solver = self._warm
+            r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg,
+                       x0=np.clip(self._wb.shift(prev["x"]), lbx, ubx),
+                       lam_x0=self._wb.shift(prev["lam_x"]), lam_g0=self._gb.shift(prev["lam_g"]))
+            ok = bool(solver.stats()["success"])
+            if not ok:  # a bad warm start (after a large disturbance) can stall IPOPT
+                log.info("economic MPC: warm solve failed (%s), retrying cold",
+                         solver.stats()["return_status"])
+        if not (warm and prev is not None) or not ok:
+            solver = self._cold
+            r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, **cold)
+        st = solver.stats()
         ok = bool(st["success"])
-        if not ok and args is not cold:
-            # a bad warm start (after a large disturbance) can stall IPOPT: retry cold
-            log.info("economic MPC: warm solve failed (%s), retrying cold", st["return_status"])
-            r = self._solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, **cold)
-            st = self._solver.stats()
-            ok = bool(st["success"])
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         wsol = np.asarray(r["x"]).ravel()
         self._prev = {"x": wsol, "lam_x": np.asarray(r["lam_x"]).ravel(),
@@ -371,6 +387,22 @@ class EconomicMPC:
     def reset(self) -> None:
         """Forget the previous solution (next solve starts cold)."""
         self._prev = None
+
+
+def _dynamics(model, substeps: int):
+    """``f(x, u)`` (SX) and ``F(x, u, dt)`` of a ThermalModel (parameters fixed) or of a
+    :class:`thermctl.reduce.ReducedNetwork` (whose ``to_casadi`` returns ``(f, F)``)."""
+    cas = model.to_casadi(substeps=substeps)
+    if isinstance(cas, tuple):
+        f, F = cas
+        return (f.expand() if f.is_a("MXFunction") else f), F
+    p = ca.DM(model.p)
+    nx, nu = model.network.n_states, model.network.n_inputs
+    x, u, dt = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.MX.sym("dt")
+    f = ca.Function("f", [x, u], [cas.f(x, u, p)], ["x", "u"], ["xdot"])
+    xm, um = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
+    F = ca.Function("F", [xm, um, dt], [cas.F(xm, um, p, dt)], ["x", "u", "dt"], ["x_next"])
+    return f, F
 
 
 def main(argv=None):

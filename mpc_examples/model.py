@@ -22,7 +22,7 @@ import numpy as np
 
 from thermctl.model import ThermalModel, zoh
 
-__all__ = ["identified_model", "controller_model", "GainKalmanFilter"]
+__all__ = ["identified_model", "controller_model", "reduced_model", "GainKalmanFilter"]
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ def controller_model(tb, kind: str = "identified", end=None) -> ThermalModel:
 
     Parameters
     ----------
-    tb : testbed
+    tb : thermctl.testbed.TestbedResult
     kind : {"identified", "true", "conduction-only"}
         ``true``: the plant's own model (perfect structure and parameters, still no
         knowledge of the gains); ``conduction-only``: walls only, no air paths.
@@ -82,6 +82,31 @@ def controller_model(tb, kind: str = "identified", end=None) -> ThermalModel:
     if kind == "conduction-only":
         return ThermalModel(tb.model.network.conduction_only())
     raise ValueError(f"model kind must be one of {MODEL_KINDS}, found {kind!r}")
+
+
+def reduced_model(tb, model: ThermalModel, order: int):
+    """``model`` reduced to ``order`` states by :func:`thermctl.reduce.structured`.
+
+    Every zone temperature stays a state and the model stays bilinear in the supply flow;
+    the edge (wall, air-path) states become ``order − n_zones`` modes, chosen at the boxes'
+    minimum flows (occupied) and at zero flow (night).
+
+    Returns
+    -------
+    thermctl.reduce.ReducedNetwork
+        Stands in for the ThermalModel in both MPCs and the Kalman filter.
+    """
+    from thermctl.reduce import structured
+
+    boxes = tb.truth.details["vav_boxes"]
+    net = model.network
+    ms = {z: boxes[z]["ms_min"] for z in net.zones if z in boxes}
+    Tb = tb.data[[f"T:{b}" for b in net.boundary]].mean().to_numpy()
+    op = model.operating_point(ms=ms, Ts=float(tb.controller.settings.T_ahu),
+                               T=dict(zip(net.boundary, Tb)))
+    red = structured(model, op, order=int(order), design_ms=[0.0])
+    log.info("reduced the model from %d to %d states", net.n_states, red.network.n_states)
+    return red.network
 
 
 class GainKalmanFilter:

@@ -28,7 +28,7 @@ from thermctl.testbed import Plant, VAVController, generate
 
 from .common import (ClosedLoopResult, ComfortBand, Forecast, HVACModel, example_parser,
                      format_table, kpi_table, plot_closed_loop, save_outputs)
-from .model import GainKalmanFilter, controller_model
+from .model import GainKalmanFilter, controller_model, reduced_model
 
 __all__ = ["Scenario", "make_scenario", "run_baseline", "run_mpc", "run_example"]
 
@@ -279,7 +279,7 @@ def run_example(kind: str, argv=None):
     else:
         parser.add_argument("--qp-solver", choices=["qpoases", "osqp", "piqp", "highs"],
                             default="qpoases",
-                            help="QP solver plugin of casadi.qpsol")
+                            help="QP solver plugin of casadi.conic")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(message)s")
@@ -296,12 +296,16 @@ def run_example(kind: str, argv=None):
     meta = {"example": kind, "args": vars(args), "building": scn.tb.spec.name,
             "start": str(scn.start), "models": {}}
     for mk in kinds:
-        model = controller_model(scn.tb, mk, end=scn.start)
+        full = controller_model(scn.tb, mk, end=scn.start)
+        model = reduced_model(scn.tb, full, args.order) if args.order else full
         mpc = _make_controller(kind, model, scn, args, N)
         label = f"{'economic NMPC' if kind == 'economic' else 'linear MPC'} ({mk} model)"
-        meta["models"][mk] = {"edges": [(e.a, e.b) for e in model.network.convection_edges],
-                              "rbar_v": np.asarray(model.rbar_v).tolist(),
-                              "c_v": np.asarray(model.c_v).tolist(),
+        if args.order:
+            label = label[:-1] + f", {model.network.n_states} states)"
+        meta["models"][mk] = {"edges": [(e.a, e.b) for e in full.network.convection_edges],
+                              "rbar_v": np.asarray(full.rbar_v).tolist(),
+                              "c_v": np.asarray(full.c_v).tolist(),
+                              "states": model.network.n_states,
                               "build_time_s": getattr(mpc, "build_time", None),
                               "n_variables": getattr(mpc, "n_variables", None)}
         results.append(run_mpc(scn, mpc, model, label, args.backoff, progress=args.verbose))
@@ -312,7 +316,8 @@ def run_example(kind: str, argv=None):
     if not args.no_figure:
         paths["png"] = plot_closed_loop(results, scn.band, scn.comfort_zones,
                                         args.out / f"{stem}.png",
-                                        title=f"{label.split(' (')[0]} vs baseline — {scn.tb.spec.name}")
+                                        title=f"{'economic NMPC' if kind == 'economic' else 'linear MPC'}"
+                                              f" vs baseline — {scn.tb.spec.name}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return table
 

@@ -259,8 +259,8 @@ def _run_example(module, tmp_path, *extra):
     return out.stdout
 
 
-@pytest.mark.xfail(strict=False, reason="work in progress at the end of session 1: the fast mode "
-                   "identifies on fewer days than SIN needs (N = 7 < n + 2 = 8); see issue 8")
+@pytest.mark.xfail(strict=False, reason="work in progress at the end of session 1: the fast-mode "
+                   "end-to-end run does not pass yet; see issue 8")
 @pytest.mark.parametrize("module, stem, extra", [
     ("mpc_examples.economic_mpc", "economic_mpc", ("--no-figure", "--no-band-baseline")),
     ("mpc_examples.linear_mpc", "linear_mpc", ()),
