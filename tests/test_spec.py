@@ -400,3 +400,26 @@ def test_json_dump_is_plain_json(small_spec, tmp_path):
     data = json.loads(path.read_text())
     assert data["walls"][2]["R"] == list(small_spec.walls[2].R)
     assert "u_value" not in data["walls"][2]
+
+
+def test_air_path_length_given_estimated_or_none(small_spec):
+    # given in `distances` (also for a pair with a wall): the spec's value, not estimated
+    assert small_spec.air_path_length("r1", "r2") == (4.0, False)
+    assert small_spec.air_path_length("r3", "r1") == (9.0, False)
+    # r2–hallway share a wall but have no length: two cubes' centres, (V_a^⅓ + V_b^⅓) / 2
+    d, est = small_spec.air_path_length("hallway", "r2")
+    assert est and d == pytest.approx(0.5 * (45.0 ** (1 / 3) + 120.0 ** (1 / 3)), rel=1e-12)
+    assert d == pytest.approx(4.2447, abs=1e-4)
+    # a zone and a boundary node, or two zones with neither wall nor length: nothing
+    assert small_spec.air_path_length("r2", "outside") == (None, False)
+    assert frozenset(("r1", "r2")) in small_spec.wall_pairs()
+    assert frozenset(("r1", "outside")) not in small_spec.wall_pairs()   # boundary walls
+
+
+def test_candidate_pairs_include_wall_pairs_without_length(small_spec):
+    from thermctl.greybox.selection import candidate_pairs
+    cands = {c.pair: c for c in candidate_pairs(small_spec)}
+    assert cands[("hallway", "r2")].parallel and cands[("hallway", "r2")].unmeasured
+    assert cands[("hallway", "r2")].d == pytest.approx(4.2447, abs=1e-4)
+    assert cands[("r1", "r3")].d == 9.0 and not cands[("r1", "r3")].parallel
+    assert ("hallway", "r2") not in {c.pair for c in candidate_pairs(small_spec, parallel=False)}

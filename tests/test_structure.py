@@ -287,7 +287,16 @@ def test_allow_parallel_keeps_wall_pairs(ggm_data, ggm_net):
     sid = StructureIdentifier(rule="threshold", allow_parallel=True).fit(ggm_data, ggm_net)
     got = {(e.a, e.b) for e in sid.edges_}
     # z0-z1 share a wall and the graph edge; with a distance it now becomes an air path
-    assert ("z0", "z1") in got and ("z3", "z4") not in got  # z3-z4 has no distance
+    assert ("z0", "z1") in got
+    # z3-z4 share a wall but the spec gives no length: the estimated one (a door in the
+    # common wall, BuildingSpec.air_path_length) makes it a candidate too
+    spec = ggm_net.spec
+    assert spec.distance("z3", "z4") is None and ("z3", "z4") in got
+    e = next(e for e in sid.edges_ if (e.a, e.b) == ("z3", "z4"))
+    assert e.d == spec.air_path_length("z3", "z4")[0]
+    # without allow_parallel, neither wall pair is a candidate
+    plain = StructureIdentifier(rule="threshold").fit(ggm_data, ggm_net)
+    assert {("z0", "z1"), ("z3", "z4")}.isdisjoint(plain.candidates_)
 
 
 def test_glasso_cv(ggm_data, ggm_net):

@@ -10,6 +10,7 @@ import json
 import logging
 import shutil
 import tempfile
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from . import __version__
 from .data import Measurements
-from .errors import DataError
+from .errors import BoundWarning, DataError, EstimationError
 from .io import model_to_dict, save_model
 from .model import ThermalModel
 from .network import ThermalNetwork
@@ -28,36 +29,76 @@ __all__ = ["IdentifyOptions", "Identification", "identify", "write_outputs", "st
 logger = logging.getLogger(__name__)
 
 
+CRITERIA = ("likelihood", "kstep", "simulation")
+SELECTIONS = ("model", "scores")
+
+
 @dataclass
 class IdentifyOptions:
     """Settings of :func:`identify` (the CLI's options).
 
+    The default is thermctl's grey-box identification: SIN proposes candidate air paths
+    (walls allowed: an open door beside a wall is an air path), backward elimination by
+    BIC on the Kalman-filter likelihood keeps the ones the data need, and R̄_v comes from
+    the likelihood with unmeasured gains as random-walk states, with intervals. The
+    paper's pipeline is ``criterion="simulation", selection="scores"``. Why the default
+    differs from the paper: ``docs/identification.md`` (measured on a family of testbed
+    buildings, ``benchmarks/identification.py``).
+
     Attributes
     ----------
+    criterion : {"likelihood", "kstep", "simulation"}
+        Parameter estimation criterion: Kalman likelihood (default), k-step-ahead
+        prediction error from filtered states, or the paper's open-loop simulation error.
+    selection : {"model", "scores"}
+        ``model``: candidates pruned by an information criterion on the likelihood
+        (:func:`thermctl.greybox.select_edges`); ``scores``: the paper's rule on the SIN
+        scores alone (forced with ``criterion="simulation"``).
+    candidates : {"sin", "all"}
+        Candidates of the model-based selection: the union of SIN's argmax and threshold
+        picks (walls allowed), or every pair with a known or estimable air path length.
+        With too few days for SIN, ``all`` is used (noted).
+    selection_criterion : {"bic", "aic", "holdout"}
+    margin : float
+        Criterion improvement an edge must bring to stay in the model [-].
+    solar : bool
+        Per-zone solar apertures on the data's ``solar:`` columns (grey-box criteria).
+    intervals : {"profile", "wald", "none"}
+        Uncertainty of R̄_v and τ0 (likelihood criterion).
     structure_method : {"sin", "glasso"}
         Concentration-graph method (paper: SIN).
     level : float
         SIN significance level (paper: 0.05).
     rule : {"paper", "threshold"}
-        Edge selection rule (paper: each zone's argmax partner).
+        Edge selection rule of ``selection="scores"`` (paper: each zone's argmax partner).
     s_min : float
         Score threshold of the ``threshold`` rule.
     allow_parallel : bool
-        Keep zone pairs joined by a wall as candidates.
+        ``selection="scores"``: keep zone pairs joined by a wall as candidates (the
+        model-based selection always does).
     estimator : {"nlp", "single_shooting", "grid", "none"}
-        ``nlp``: CasADi multiple-shooting NLP (IPOPT); ``single_shooting``: the same cost
-        through the exact ZOH simulator; ``grid``: the paper's exhaustive search only;
-        ``none``: keep the paper's R̄_v and C_v.
+        ``criterion="simulation"``: ``nlp``: CasADi multiple-shooting NLP (IPOPT);
+        ``single_shooting``: the same cost through the exact ZOH simulator; ``grid``: the
+        paper's exhaustive search only; ``none``: keep the paper's R̄_v and C_v.
     window_hours : float
-        Cost window at the start of the calibration data [h] (paper: 12).
+        ``criterion="simulation"``: cost window at the start of the calibration data [h]
+        (paper: 12).
     initial_state : {"paper", "burn_in", "estimate"}
-        Initial-state handling of the cost.
+        ``criterion="simulation"``: initial-state handling of the cost.
     grid : bool
-        Also run the grid (the reference, and the J-vs-R̄_v figure).
+        ``criterion="simulation"``: also run the grid (the reference, and the J-vs-R̄_v
+        figure).
     calibration, validation : tuple of str or None
         Date windows ``(start, end)``; default: :meth:`Measurements.split`.
     """
 
+    criterion: str = "likelihood"
+    selection: str = "model"
+    candidates: str = "sin"
+    selection_criterion: str = "bic"
+    margin: float = 10.0
+    solar: bool = True
+    intervals: str = "profile"
     structure_method: str = "sin"
     level: float = 0.05
     rule: str = "paper"
@@ -70,6 +111,21 @@ class IdentifyOptions:
     calibration: tuple | None = None
     validation: tuple | None = None
 
+    def check(self):
+        for name, allowed in (("criterion", CRITERIA), ("selection", SELECTIONS),
+                              ("candidates", ("sin", "all")),
+                              ("selection_criterion", ("bic", "aic", "holdout")),
+                              ("intervals", ("profile", "wald", "none")),
+                              ("estimator", ("nlp", "single_shooting", "grid", "none"))):
+            if getattr(self, name) not in allowed:
+                raise DataError(f"identify option {name} must be one of {list(allowed)}, "
+                                f"found {getattr(self, name)!r}")
+
+    @property
+    def paper(self) -> bool:
+        """The paper's pipeline (simulation criterion, SIN-score selection)."""
+        return self.criterion == "simulation"
+
 
 @dataclass
 class Identification:
@@ -79,22 +135,32 @@ class Identification:
     ----------
     model : ThermalModel
         Spec + selected convection edges + fitted parameters.
-    structure : StructureIdentifier
-        The fitted structure identifier (graphs, scores, edges).
+    structure : StructureIdentifier or None
+        The fitted SIN structure identifier (graphs, scores; its edges are the paper
+        rule's picks). None when the data have too few days for SIN.
     estimate : EstimationResult or None
+        Paper pipeline: the simulation-criterion fit.
     grid : GridResult or None
     calibration, validation : Measurements
     options : IdentifyOptions
+    selection : SelectionResult or None
+        Grey-box pipeline: the model-based selection (path, reasons).
+    greybox : GreyboxEstimator or None
+        Grey-box pipeline: the final fit of the selected structure.
+    intervals : IdentifiabilityReport or None
     """
 
     model: ThermalModel
-    structure: StructureIdentifier
+    structure: StructureIdentifier | None
     estimate: object
     grid: object
     calibration: Measurements
     validation: Measurements
     options: IdentifyOptions
     notes: list = field(default_factory=list)
+    selection: object = None
+    greybox: object = None
+    intervals: object = None
 
 
 def identify(meas: Measurements, options: IdentifyOptions | None = None,
@@ -114,7 +180,30 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     Identification
     """
     opt = options or IdentifyOptions()
+    opt.check()
     cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
+    if opt.paper or opt.selection == "scores":
+        ident = _identify_paper(meas, cal, val, opt, progress)
+    else:
+        ident = _identify_greybox(meas, cal, val, opt, progress)
+    return ident
+
+
+def _meta(meas, cal, val, opt, scores) -> dict:
+    return {
+        "edge_scores": scores,
+        "data": {"source": meas.source, "start": str(meas.start), "end": str(meas.end),
+                 "step_s": meas.step.total_seconds(), "units": meas.units,
+                 "calibration": [str(cal.start), str(cal.end)],
+                 "validation": [str(val.start), str(val.end)]},
+        "options": asdict(opt),
+        "thermctl": __version__,
+    }
+
+
+def _identify_paper(meas, cal, val, opt, progress) -> Identification:
+    """SIN + rule, then R̄_v, C_v by the simulation criterion (or the grey-box criterion
+    on the SIN-rule structure when ``selection="scores"`` with a grey-box criterion)."""
     spec = meas.spec
     net0 = ThermalNetwork(spec)
     notes = []
@@ -127,28 +216,135 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
         progress("structure", 1, 1)
     net = sid.network_
     scores = {f"air:{e.a}-{e.b}": e.score for e in sid.edges_}
-    est = grid = None
+    est = grid = gb = ida = None
     from .model import C_V_PAPER, RBAR_V_PAPER
     rbar_v, c_v = RBAR_V_PAPER, C_V_PAPER
     if not net.convection_edges:
         notes.append("no convection edge selected: the model is conduction-only")
+    elif not opt.paper:
+        gb, ida = _greybox_fit(net, cal, opt, notes)
+        rbar_v, c_v = gb.rbar_v_, gb.c_v_
     elif opt.estimator != "none":
         est, grid = _estimate(net, cal, opt, progress)
         if est is not None:
             rbar_v, c_v = est.rbar_v, est.c_v
         else:
             rbar_v, c_v = grid.best_rbar_v, grid.best_c_v
-    meta = {
-        "edge_scores": scores,
-        "data": {"source": meas.source, "start": str(meas.start), "end": str(meas.end),
-                 "step_s": meas.step.total_seconds(), "units": meas.units,
-                 "calibration": [str(cal.start), str(cal.end)],
-                 "validation": [str(val.start), str(val.end)]},
-        "options": asdict(opt),
-        "thermctl": __version__,
-    }
+    meta = _meta(meas, cal, val, opt, scores)
+    if gb is not None:
+        meta["greybox"] = _greybox_meta(gb, ida)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v, meta=meta)
-    return Identification(model, sid, est, grid, cal, val, opt, notes)
+    return Identification(model, sid, est, grid, cal, val, opt, notes, greybox=gb, intervals=ida)
+
+
+def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
+    """SIN candidates → backward elimination by BIC → grey-box fit with intervals."""
+    from .greybox.selection import Candidate, candidate_pairs, select_edges
+    from .structure.selection import select_edges as rule_edges
+
+    spec = meas.spec
+    net0 = ThermalNetwork(spec)
+    notes = []
+    sid = None
+    cands = None
+    if opt.candidates == "sin":
+        if progress:
+            progress("structure", 0, 1)
+        try:
+            sid = StructureIdentifier(method=opt.structure_method, level=opt.level,
+                                      rule="paper", s_min=opt.s_min, allow_parallel=True)
+            sid.fit(cal.frame, net0)
+        except DataError as exc:
+            sid = None
+            notes.append(f"SIN could not run ({exc}); every pair with an air path length "
+                         "was a candidate instead")
+        if progress:
+            progress("structure", 1, 1)
+        if sid is not None:
+            dist = {p: spec.air_path_length(*p)[0] for p in sid.candidates_}
+            picks = {tuple(sorted((e.a, e.b))) for e in sid.edges_}
+            picks |= {tuple(sorted((e.a, e.b))) for e in rule_edges(
+                {p: sid.scores_[p] for p in dist}, dist, sid.zones_, "threshold", opt.s_min)}
+            cands = sorted(picks)
+    if cands is None:
+        cands = [c.pair for c in candidate_pairs(spec)]
+    scores = {} if sid is None else {f"air:{a}-{b}": sid.scores_.get((a, b), float("nan"))
+                                     for a, b in cands}
+    sel = gb = ida = None
+    if not cands:
+        notes.append("no candidate air path (no SIN pick, no pair with a length): the model "
+                     "is conduction-only")
+        net = net0
+    else:
+        n_done = [0]
+
+        def say(msg):
+            n_done[0] += 1
+            if progress:
+                progress("selection", min(n_done[0], len(cands)), len(cands))
+
+        # from SIN's few picks: backward; from every pair: forward (cheaper and what
+        # model-based selection does for small buildings)
+        direction = "backward" if sid is not None else "both"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            sel = select_edges(spec, cal, candidates=cands, criterion=opt.selection_criterion,
+                               direction=direction, margin=opt.margin, progress=say,
+                               final_criterion=opt.criterion, solar=opt.solar)
+        net = ThermalNetwork(spec, sel.edges)
+        if not sel.edges:
+            notes.append("the data support no convection edge: the model is conduction-only")
+        else:
+            gb = sel.estimator
+            ida = _intervals(gb, opt, notes)
+    if gb is not None:
+        rbar_v, c_v = gb.rbar_v_, gb.c_v_
+    else:
+        from .model import C_V_PAPER, RBAR_V_PAPER
+        rbar_v, c_v = RBAR_V_PAPER, C_V_PAPER
+    meta = _meta(meas, cal, val, opt, scores)
+    if sel is not None:
+        meta["selection"] = {"path": [[st.action, st.edge, st.value, st.delta] for st in sel.path],
+                             "reasons": sel.reasons}
+    if gb is not None:
+        meta["greybox"] = _greybox_meta(gb, ida)
+    model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v, meta=meta)
+    return Identification(model, sid, None, None, cal, val, opt, notes, selection=sel,
+                          greybox=gb, intervals=ida)
+
+
+def _greybox_fit(net, cal, opt, notes):
+    """Grey-box fit of a given structure (``selection="scores"`` with a grey-box criterion)."""
+    from .greybox import GreyboxEstimator
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BoundWarning)
+        gb = GreyboxEstimator(net, criterion=opt.criterion, solar=opt.solar).fit(cal)
+    return gb, _intervals(gb, opt, notes)
+
+
+def _intervals(gb, opt, notes):
+    if opt.intervals == "none" or gb.criterion != "likelihood":
+        return None
+    from .greybox import identifiability
+    try:
+        return identifiability(gb, params=("rbar_v", "tau0"), method=opt.intervals)
+    except (EstimationError, np.linalg.LinAlgError) as exc:
+        notes.append(f"no intervals: {exc}")
+        return None
+
+
+def _greybox_meta(gb, ida) -> dict:
+    out = {"criterion": gb.criterion, "params": dict(gb.params_), "nll": gb.nll_,
+           "aic": gb.aic_, "bic": gb.bic_, "n_obs": gb.n_obs_, "rows": gb.problem_.fit_rule,
+           "at_bounds": list(gb.result_.at_bounds), "fit_time_s": gb.fit_time_}
+    if ida is not None:
+        out["intervals"] = {k: {"value": iv.value, "lower": iv.lower, "upper": iv.upper,
+                                "level": iv.level, "method": iv.method, "unit": iv.unit,
+                                "identifiable": iv.identifiable}
+                            for k, iv in ida.intervals.items()
+                            if k.startswith(("rbar_v", "tau0"))}
+        out["verdicts"] = dict(ida.verdicts)
+    return out
 
 
 def _estimate(net, cal, opt, progress):
@@ -223,12 +419,18 @@ def write_outputs(ident: Identification, outdir) -> dict:
     with staged_output(outdir) as tmp:
         save_model(ident.model, tmp / "model.json")
         sid = ident.structure
-        save_figure(plot_network(sid), tmp, "network", "Structure",
-                    "Identified network: conduction (solid) and convection (dashed) edges (paper Fig. 3).")
-        save_figure(plot_scores(sid), tmp, "scores", "Structure",
-                    "Edge scores s_ij: fraction of the time-of-day graphs with the edge.")
-        save_figure(plot_correlations(sid), tmp, "correlations", "Structure",
-                    "Marginal vs partial correlation over the day (paper Fig. 7).")
+        if sid is not None:
+            how = ("SIN candidates, kept by " + ident.options.selection_criterion.upper()
+                   if ident.selection is not None else f"{sid.method}, rule={sid.rule}")
+            save_figure(plot_network(sid, network=ident.model.network,
+                                     title=f"{ident.model.network.spec.name}: identified network ({how})"),
+                        tmp, "network", "Structure",
+                        "Identified network: conduction (solid) and convection (dashed) edges, "
+                        "labelled with their SIN scores (paper Fig. 3).")
+            save_figure(plot_scores(sid), tmp, "scores", "Structure",
+                        "Edge scores s_ij: fraction of the time-of-day graphs with the edge.")
+            save_figure(plot_correlations(sid), tmp, "correlations", "Structure",
+                        "Marginal vs partial correlation over the day (paper Fig. 7).")
         if ident.grid is not None:
             from .plots.estimate import plot_cost_vs_rbar
             save_figure(plot_cost_vs_rbar(ident.grid, fit=ident.estimate), tmp, "cost", "Parameters",
@@ -250,22 +452,44 @@ def _plain(v):
 def identification_document(ident: Identification) -> dict:
     """The content of ``identification.json`` (with the report blocks)."""
     sid, est, grid, model = ident.structure, ident.estimate, ident.grid, ident.model
+    sel, gb, ida = ident.selection, ident.greybox, ident.intervals
     q = ident.calibration.quality
-    edges = [{"a": e.a, "b": e.b, "score": e.score, "d": e.d} for e in sid.edges_]
-    top = sorted(sid.scores_.items(), key=lambda kv: -kv[1])[:15]
+    scores = model.meta.get("edge_scores", {})
+    edges = [{"a": e.a, "b": e.b, "d": e.d, "score": scores.get(e.name),
+              "parallel_to_wall": frozenset((e.a, e.b)) in model.network.spec.wall_pairs()}
+             for e in model.network.convection_edges]
+    top = [] if sid is None else sorted(sid.scores_.items(), key=lambda kv: -kv[1])[:15]
     conv_tau = _edge_time_constants(model)
+    opt = ident.options
     doc = {
-        "format": "thermctl-identification", "version": 1,
+        "format": "thermctl-identification", "version": 2,
+        "method": ("paper (SIN rule + simulation criterion)" if opt.paper else
+                   f"grey-box ({opt.criterion}; structure: "
+                   + ("model-based selection" if sel is not None else "SIN rule") + ")"),
         "model": model_to_dict(model)["parameters"],
         "alpha": model.network.spec.alpha(),
         "alpha_per_wall": model.network.spec.alphas(),
         "structure": {
-            "method": sid.method, "level": sid.level, "rule": sid.rule,
-            "days_used": len(sid.days_used_), "days_dropped": [[str(d), r] for d, r in sid.days_dropped_],
+            "method": None if sid is None else sid.method,
+            "level": None if sid is None else sid.level,
+            "rule": None if sid is None else sid.rule,
+            "days_used": None if sid is None else len(sid.days_used_),
+            "days_dropped": [] if sid is None else [[str(d), r] for d, r in sid.days_dropped_],
+            "sin_edges": [] if sid is None else [{"a": e.a, "b": e.b, "score": e.score}
+                                                 for e in sid.edges_],
             "edges": edges,
             "top_scores": [{"a": a, "b": b, "score": s} for (a, b), s in top],
+            "selection": None if sel is None else {
+                "criterion": sel.criterion, "margin": opt.margin,
+                "candidates": [c.name for c in sel.candidates],
+                "path": [{"action": st.action, "edge": st.edge, "value": st.value,
+                          "delta": st.delta, "edges": st.edges, "note": st.note}
+                         for st in sel.path],
+                "reasons": sel.reasons, "per_edge_rbar_v": sel.per_edge,
+                "fits": sel.n_fits, "time_s": sel.time},
         },
         "estimate": _estimate_summary(est),
+        "greybox": model.meta.get("greybox"),
         "grid": None if grid is None else {
             "best_rbar_v": grid.best_rbar_v, "best_c_v": grid.best_c_v, "best_J": grid.best_J,
             "n_points": int(np.size(grid.J)), "wall_time_s": grid.wall_time,
@@ -276,12 +500,34 @@ def identification_document(ident: Identification) -> dict:
     }
     blocks = [
         {"section": "Data quality", "kind": "text", "title": "Summary", "content": q.summary()},
+        {"section": "Structure", "kind": "text", "title": "Method", "content": doc["method"]},
         {"section": "Structure", "kind": "table", "title": "Selected convection edges",
-         "content": [{"edge": f"{e['a']} – {e['b']}", "score": e["score"], "d [m]": e["d"]}
-                     for e in edges] or [{"edge": "none", "score": "", "d [m]": ""}]},
-        {"section": "Structure", "kind": "table", "title": "Highest pair scores (walls included)",
-         "content": [{"pair": f"{a} – {b}", "score": s} for (a, b), s in top]},
+         "content": [{"edge": f"{e['a']} – {e['b']}", "SIN score": e["score"], "d [m]": e["d"],
+                      "beside a wall": "yes" if e["parallel_to_wall"] else "no"}
+                     for e in edges] or [{"edge": "none", "SIN score": "", "d [m]": "",
+                                          "beside a wall": ""}]},
     ]
+    if sel is not None:
+        blocks.append({"section": "Structure", "kind": "table",
+                       "title": f"Model-based selection ({sel.criterion.upper()}, margin {opt.margin:g})",
+                       "content": [{"step": st.action, "edge": st.edge or "",
+                                    sel.criterion.upper(): st.value, "change": st.delta,
+                                    "note": st.note} for st in sel.path]})
+        blocks.append({"section": "Structure", "kind": "table", "title": "Why each candidate is in or out",
+                       "content": [{"candidate": k, "reason": v} for k, v in sel.reasons.items()]})
+    if top:
+        blocks.append({"section": "Structure", "kind": "table",
+                       "title": "Highest SIN pair scores (walls included)",
+                       "content": [{"pair": f"{a} – {b}", "score": s} for (a, b), s in top]})
+    if gb is not None:
+        g = doc["greybox"]
+        rows = [{"parameter": k, "value": v} for k, v in g["params"].items()]
+        blocks.append({"section": "Parameters", "kind": "table",
+                       "title": f"Grey-box estimate ({g['criterion']}, {g['n_obs']} observations, "
+                                f"rows: {g['rows']})", "content": rows})
+        if ida is not None:
+            blocks.append({"section": "Parameters", "kind": "text", "title": "Identifiability",
+                           "content": "\n".join(ida.verdicts.values())})
     if est is not None or grid is not None:
         rows = []
         if grid is not None:

@@ -155,6 +155,34 @@ class BuildingSpec:
         """Air path length between two zones [m], or None if the spec gives none."""
         return self.distance_table().get(frozenset((a, b)))
 
+    def air_path_length(self, a: str, b: str) -> tuple[float | None, bool]:
+        """Air path length for a candidate convection edge [m], and whether it is estimated.
+
+        The spec's ``distances`` first. Zones that share a wall but have no given length
+        (an open door beside a wall, which a spec author rarely lists) get the distance
+        between the centres of two cubes of the zones' volumes,
+        ``(V_a^(1/3) + V_b^(1/3)) / 2``: an air path through a door in the common wall.
+        The estimate only scales that edge's resistance ``R̄_v·d``; with one R̄_v per edge
+        it cancels. Other pairs without a length: ``(None, False)``.
+        """
+        d = self.distance(a, b)
+        if d is not None:
+            return d, False
+        if frozenset((a, b)) in self.wall_pairs():
+            za, zb = self.zone(a), self.zone(b)
+            return 0.5 * (za.volume ** (1.0 / 3.0) + zb.volume ** (1.0 / 3.0)), True
+        return None, False
+
+    def wall_pairs(self) -> frozenset:
+        """Zone pairs joined by at least one wall (cached)."""
+        pairs = self.__dict__.get("_wall_pairs")
+        if pairs is None:
+            zones = set(self.zone_names)
+            pairs = frozenset(frozenset((w.a, w.b)) for w in self.walls
+                              if w.a in zones and w.b in zones)
+            object.__setattr__(self, "_wall_pairs", pairs)
+        return pairs
+
     def distance_table(self) -> dict:
         """``{frozenset((a, b)): d}`` for every given air path length [m] (cached)."""
         table = self.__dict__.get("_distance_table")

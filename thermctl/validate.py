@@ -1,10 +1,13 @@
-"""Validation measures: open-loop prediction and the step-response matrix.
+"""Validation measures: open-loop prediction, k-step-ahead prediction, step responses.
 
 On closed-loop data the zones sit near their set points and unmeasured gains
 dominate the error, so a 48-h open-loop simulation barely separates models
 (DESIGN.md, "Validation: measures that tell"). What an MPC acts through is the
 response of every zone temperature to heat put into each zone: the step-response
-matrix. Both are computed here for any :class:`~thermctl.model.ThermalModel`.
+matrix. Between the two sits the k-step-ahead prediction error from Kalman-filtered
+states (1, 6, 24 h): what an MPC's predictions over its horizon would miss, with the
+unmeasured gains estimated the way a controller would. All three are computed here for
+any :class:`~thermctl.model.ThermalModel`.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from .errors import ModelError
 from .model import ThermalModel, zoh
 
 __all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "relative_error",
-           "minimum_flows", "ValidationReport", "validate"]
+           "minimum_flows", "kstep_validation", "ValidationReport", "validate"]
 
 
 @dataclass
@@ -149,6 +152,67 @@ def relative_error(G, G_ref) -> np.ndarray:
     return num / den
 
 
+def _physical_fix(model: ThermalModel) -> tuple[dict, bool]:
+    """Grey-box parameters that reproduce ``model``'s convection edges, and per_edge."""
+    edges = model.network.convection_edges
+    if not edges:
+        return {}, False
+    rb = np.atleast_1d(np.asarray(model.rbar_v, dtype=float)) * np.ones(len(edges))
+    cv = np.atleast_1d(np.asarray(model.c_v, dtype=float)) * np.ones(len(edges))
+    # τ0 is shared in the grey-box model; the geometric mean keeps its scale (C_v hardly
+    # matters at data steps of minutes: the edges' own time constants are seconds)
+    tau0 = float(np.exp(np.mean(np.log(rb * cv))))
+    if np.allclose(rb, rb[0], rtol=1e-9):
+        return {"rbar_v": float(rb[0]), "tau0": tau0}, False
+    fix = {f"rbar_v[{e.name}]": float(r) for e, r in zip(edges, rb)}
+    fix["tau0"] = tau0
+    return fix, True
+
+
+def kstep_validation(models: dict, calibration, validation,
+                     horizons_h=(1.0, 6.0, 24.0), solar=True) -> dict:
+    """k-step-ahead prediction errors of several models on held-back data.
+
+    Every model gets the same treatment: its walls and convection edges are held as they
+    are; the unmeasured gains (random-walk states), solar apertures and noise intensities
+    are fitted by maximum likelihood on ``calibration``
+    (:class:`~thermctl.greybox.GreyboxEstimator` with the physical parameters fixed);
+    the Kalman filter then runs through ``validation`` and, from its state every hour,
+    each model predicts ``horizons_h`` ahead with the gains held
+    (:func:`~thermctl.greybox.kstep_errors`).
+
+    Parameters
+    ----------
+    models : dict of str to ThermalModel
+    calibration, validation : thermctl.data.Measurements
+    horizons_h : sequence of float
+        [h]
+    solar : bool
+        Solar apertures on the data's ``solar:`` columns.
+
+    Returns
+    -------
+    dict of str to KStepResult
+        RMSE in K.
+    """
+    import warnings
+
+    from .errors import BoundWarning
+    from .greybox import GreyboxEstimator, kstep_errors
+
+    out = {}
+    for name, m in models.items():
+        fix, per_edge = _physical_fix(m)
+        est = GreyboxEstimator(m.network, fix=fix or None, per_edge=per_edge, solar=solar,
+                               rbar_v=np.asarray(m.rbar_v, float))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            est.fit(calibration)
+        pb = est.problem_for(validation)
+        out[name] = kstep_errors(pb, est.eta_, horizons=[h * 3600.0 for h in horizons_h])
+    return out
+
+
 @dataclass
 class ValidationReport:
     """Identified vs conduction-only (vs truth, on testbed data).
@@ -168,6 +232,8 @@ class ValidationReport:
         Supply flow during the step responses [kg/s].
     units : str
         Temperature unit of the reported errors ("°C" or "°F" deltas).
+    kstep : dict of str to KStepResult
+        k-step-ahead errors per model (K), when calibration data were given.
     """
 
     window: tuple
@@ -180,10 +246,11 @@ class ValidationReport:
     units: str = "K"
     to_data_units: object = None
     window_step_s: float = 300.0
+    kstep: dict = field(default_factory=dict)
 
 
 def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: ThermalModel | None = None,
-             horizons_h=(1.0, 6.0, 24.0)) -> ValidationReport:
+             horizons_h=(1.0, 6.0, 24.0), calibration=None, solar: bool = True) -> ValidationReport:
     """Open-loop comparison on held-back data and the step-response matrix.
 
     Parameters
@@ -199,7 +266,12 @@ def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: 
     truth : ThermalModel, optional
         The true model (testbed) for the step-response comparison.
     horizons_h : sequence of float
-        Step-response horizons [h].
+        Step-response and k-step horizons [h].
+    calibration : thermctl.data.Measurements, optional
+        Data the model was identified on: with it, the k-step-ahead errors of every model
+        (:func:`kstep_validation`, its noise and gain parameters fitted there).
+    solar : bool
+        Solar apertures in the k-step filters.
     """
     win = meas.window(start=start, duration=f"{hours}h")
     net = model.network
@@ -225,6 +297,8 @@ def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: 
     errors = {}
     if truth is not None:
         errors = {name: relative_error(G[name], G["truth"]) for name in ("identified", "conduction-only")}
+    ks = {} if calibration is None else kstep_validation(models, calibration, meas, horizons_h,
+                                                          solar=solar)
     return ValidationReport((str(win.start), str(win.end)), results, G, errors, tuple(horizons_h),
                             ms_min, list(net.zones), units=win.temperature_unit,
-                            to_data_units=win.to_data_units, window_step_s=dt)
+                            to_data_units=win.to_data_units, window_step_s=dt, kstep=ks)

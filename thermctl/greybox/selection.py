@@ -148,8 +148,13 @@ class SelectionResult:
         return "\n".join(lines)
 
 
-def candidate_pairs(spec, zones=None, include_unmeasured: bool = True) -> list[Candidate]:
-    """Every zone pair with a known air-path length, flagged if a wall joins it.
+def candidate_pairs(spec, zones=None, include_unmeasured: bool = True,
+                    parallel: bool = True) -> list[Candidate]:
+    """Every zone pair that could exchange air, flagged if a wall joins it.
+
+    Pairs with a length in the spec's ``distances``, and (``parallel``) every pair joined
+    by a wall, with the length of :meth:`BuildingSpec.air_path_length` (given, or estimated
+    from the volumes: an open door in the common wall).
 
     Parameters
     ----------
@@ -158,19 +163,24 @@ def candidate_pairs(spec, zones=None, include_unmeasured: bool = True) -> list[C
         Restrict to pairs within these zones.
     include_unmeasured : bool
         Also pairs with an unmeasured zone.
+    parallel : bool
+        Also pairs joined by a wall.
     """
     zset = set(spec.zone_names if zones is None else zones)
     meas = set(spec.measured_zones)
-    walls = {frozenset((w.a, w.b)) for w in spec.walls}
+    walls = spec.wall_pairs()
+    pairs = {tuple(sorted((dd.a, dd.b))) for dd in spec.distances}
+    if parallel:
+        pairs |= {tuple(sorted(p)) for p in walls}
     out = []
-    for dd in spec.distances:
-        a, b = sorted((dd.a, dd.b))
+    for a, b in sorted(pairs):
         if a not in zset or b not in zset:
             continue
         unm = a not in meas or b not in meas
         if unm and not include_unmeasured:
             continue
-        out.append(Candidate(a, b, float(dd.d), frozenset((a, b)) in walls, unm))
+        d, _ = spec.air_path_length(a, b)
+        out.append(Candidate(a, b, float(d), frozenset((a, b)) in walls, unm))
     return out
 
 
@@ -275,7 +285,8 @@ def sin_candidates(spec, data, level: float = 0.05, allow_parallel: bool = True)
 
 def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direction: str = "both",
                  start=(), max_edges: int | None = None, holdout: float = 0.3,
-                 final_per_edge: bool = False, max_iter: int = 200, margin: float = 10.0,
+                 final_per_edge: bool = False, final_criterion: str = "likelihood",
+                 max_iter: int = 200, margin: float = 10.0,
                  screen: str = "grid", progress=None, **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -303,6 +314,9 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
         Fraction of the data held back [-].
     final_per_edge : bool
         Final fit with one R̄_v per edge (default: shared, the paper's model).
+    final_criterion : {"likelihood", "kstep"}
+        Criterion of the final fit of the selected structure (the selection itself always
+        uses the likelihood).
     max_iter : int
         Per full fit.
     margin : float
@@ -432,7 +446,8 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])
     final_kw = dict(estimator_kwargs)
     final_kw.pop("per_edge", None)
-    final = GreyboxEstimator(net, per_edge=final_per_edge, max_iter=max_iter, **final_kw)
+    final = GreyboxEstimator(net, final_criterion, per_edge=final_per_edge, max_iter=max_iter,
+                             **final_kw)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         final.fit(data, init={k: v for k, v in est.params_.items() if not k.startswith("rbar_v[")}
@@ -454,10 +469,11 @@ def _cand(spec, e):
     if isinstance(e, Candidate):
         return e
     a, b = sorted((str(e[0]), str(e[1])))
-    d = float(e[2]) if len(e) > 2 else spec.distance(a, b)
+    d = float(e[2]) if len(e) > 2 else spec.air_path_length(a, b)[0]
     if d is None:
-        raise SpecError(f"candidate {a}-{b}: the spec gives no distance for this pair")
-    walls = {frozenset((w.a, w.b)) for w in spec.walls}
+        raise SpecError(f"candidate {a}-{b}: the spec gives no distance for this pair and no "
+                        "wall joins it (add it under 'distances')")
+    walls = spec.wall_pairs()
     meas = set(spec.measured_zones)
     return Candidate(a, b, d, frozenset((a, b)) in walls, a not in meas or b not in meas)
 

@@ -23,7 +23,7 @@ def _check_fitted(sid):
         raise DataError("the StructureIdentifier is not fitted; call fit(data, network) first")
 
 
-def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5)) -> Figure:
+def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5), network=None, title=None) -> Figure:
     """The thermal network with conduction (solid) and convection (dashed) edges.
 
     Like paper Fig. 3: zones are circles (hollow if unmeasured), boundary nodes grey
@@ -37,13 +37,17 @@ def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5)) -> Figure:
         Seed of the layout (used only if the Kamada-Kawai layout fails).
     figsize : tuple of float
         Figure size [in].
+    network : ThermalNetwork, optional
+        Draw this network instead of ``sid.network_`` (e.g. the model-based selection's),
+        labelling its convection edges with their SIN scores.
+    title : str, optional
 
     Returns
     -------
     matplotlib.figure.Figure
     """
     _check_fitted(sid)
-    net = sid.network_
+    net = sid.network_ if network is None else network
     g = nx.Graph()
     g.add_nodes_from(net.zones + net.boundary)
     g.add_edges_from((e.a, e.b) for e in net.edges)
@@ -61,7 +65,7 @@ def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5)) -> Figure:
         drawn.add(key)
         (x0, y0), (x1, y1) = pos[e.a], pos[e.b]
         ax.plot([x0, x1], [y0, y1], "-", color="0.35", lw=1.5, zorder=1, gid="conduction")
-    score = {frozenset((e.a, e.b)): e.score for e in sid.edges_}
+    score = {frozenset(p): v for p, v in sid.scores_.items()}
     for e in net.convection_edges:
         (x0, y0), (x1, y1) = pos[e.a], pos[e.b]
         ax.plot([x0, x1], [y0, y1], "--", color="tab:red", lw=2.0, zorder=2, gid="convection")
@@ -83,7 +87,7 @@ def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5)) -> Figure:
     ax.legend(handles=[Line2D([], [], color="0.35", lw=1.5, label="conduction"),
                        Line2D([], [], color="tab:red", ls="--", lw=2, label="convection (score)")],
               loc="best", fontsize=8)
-    ax.set_title(f"{net.spec.name}: identified thermal network ({sid.method}, rule={sid.rule})")
+    ax.set_title(title or f"{net.spec.name}: identified thermal network ({sid.method}, rule={sid.rule})")
     ax.set_axis_off()
     ax.margins(0.12)
     return fig

@@ -272,6 +272,8 @@ class StructureIdentifier:
             if frozenset(pair) in self.conduction_pairs_ and not self.allow_parallel:
                 continue
             d = known.get(frozenset(pair))
+            if d is None and frozenset(pair) in self.conduction_pairs_:
+                d, _ = network.spec.air_path_length(*pair)   # a door beside the wall
             if d is None:
                 no_d.append(pair)
             else:
