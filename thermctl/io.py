@@ -31,7 +31,8 @@ from .model import ThermalModel
 from .network import ThermalNetwork
 from .spec import spec_from_dict
 
-__all__ = ["save_model", "load_model", "model_to_dict", "model_from_dict", "atomic_write_text"]
+__all__ = ["save_model", "load_model", "model_to_dict", "model_from_dict", "atomic_write_text",
+           "read_json_file"]
 
 FORMAT = "thermctl-model"
 VERSION = 1
@@ -104,6 +105,41 @@ def atomic_write_text(path, text: str) -> None:
         raise
 
 
+def _existing_file(path, what: str, error: type[Exception]) -> Path:
+    """``path`` as a :class:`~pathlib.Path`; ``error`` naming it and ``what`` if it is no file."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: {what} not found")
+    return path
+
+
+def read_json_file(path, what: str = "file", error: type[Exception] = ModelError):
+    """The content of a JSON file, with errors that name the file.
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str, optional
+        What the file is, for the message when it is missing (e.g. ``"model file"``).
+    error : type of Exception, optional
+        Raised if the file is missing or not valid JSON (default :class:`ModelError`).
+
+    Returns
+    -------
+    dict or list
+        The decoded JSON.
+
+    Examples
+    --------
+    >>> read_json_file("out/model.json", "model file")   # doctest: +SKIP
+    """
+    path = _existing_file(path, what, error)
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: not valid JSON: {exc}") from None
+
+
 def save_model(model: ThermalModel, path) -> None:
     """Write ``model.json`` (atomically).
 
@@ -123,14 +159,8 @@ def load_model(path) -> ThermalModel:
     >>> model = load_model("out/model.json")       # doctest: +SKIP
     >>> sys = model.to_statespace(model.operating_point(ms=0.05, Ts=14, T=5))  # doctest: +SKIP
     """
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"{path}: model file not found")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"{path}: not valid JSON: {exc}") from None
-    return model_from_dict(data, source=str(path))
+    data = read_json_file(path, "model file")
+    return model_from_dict(data, source=str(Path(path)))
 
 
 def save_statespace(sys, path, op=None) -> None:
@@ -162,9 +192,7 @@ def load_statespace(path):
     """
     import control as ct
 
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"{path}: state-space file not found")
+    path = _existing_file(path, "state-space file", ModelError)
     with np.load(path, allow_pickle=False) as f:
         dt = float(f["dt"])
         sys = ct.ss(f["A"], f["B"], f["C"], f["D"], dt=dt if dt > 0 else 0,

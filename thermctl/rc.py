@@ -164,8 +164,7 @@ def alpha(R, C) -> float:
     >>> round(alpha(R, C), 4)
     9.8696
     """
-    R = np.asarray(R, dtype=float)
-    C = np.asarray(C, dtype=float)
+    R, C = _check_rc(R, C, "3R2C element")
     return float(R.sum() * C.sum() / time_constant(R, C))
 
 

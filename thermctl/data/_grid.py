@@ -46,13 +46,23 @@ def _timedelta(value, what) -> pd.Timedelta:
     """A duration from seconds (int/float) or anything :class:`pandas.Timedelta` parses."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return pd.Timedelta(seconds=value)
+    return _parse(pd.Timedelta, value,
+                  f"{what}: expected a duration such as '5min', found {value!r}")
+
+
+def _parse(parse, value, message: str):
+    """``parse(value)`` (``pd.Timedelta``, ``pd.Timestamp``), or :class:`DataError` (``message``).
+
+    pandas reports an unreadable value either by raising or by returning ``NaT`` (for
+    ``None``, ``"nat"``, ``""``), so both count as failure.
+    """
     try:
-        td = pd.Timedelta(value)
+        out = parse(value)
     except (ValueError, TypeError):
-        raise DataError(f"{what}: expected a duration such as '5min', found {value!r}") from None
-    if td is pd.NaT:
-        raise DataError(f"{what}: expected a duration such as '5min', found {value!r}")
-    return td
+        out = pd.NaT
+    if out is pd.NaT:
+        raise DataError(message)
+    return out
 
 
 def _fmt_step(seconds: float) -> str:

@@ -19,7 +19,7 @@ import pandas as pd
 
 from ..errors import DataError, DataWarning
 from ..spec import BuildingSpec
-from ._grid import _DAY_NS, _fmt_step, _runs, _timedelta
+from ._grid import _DAY_NS, _fmt_step, _parse, _runs, _timedelta
 from .days import DayArray, day_array
 
 __all__ = ["Measurements", "QualityReport", "Gap", "PAPER_CALIBRATION", "PAPER_VALIDATION_START"]
@@ -447,12 +447,7 @@ class Measurements:
         return zones
 
     def _instant(self, x, what) -> pd.Timestamp:
-        try:
-            ts = pd.Timestamp(x)
-        except (ValueError, TypeError):
-            raise DataError(f"{self.source}: {what} {x!r} is not a date or time") from None
-        if ts is pd.NaT:
-            raise DataError(f"{self.source}: {what} {x!r} is not a date or time")
+        ts = _parse(pd.Timestamp, x, f"{self.source}: {what} {x!r} is not a date or time")
         return ts.tz_localize(self.tz) if ts.tzinfo is None else ts.tz_convert(self.tz)
 
     def _range(self, rng, what):

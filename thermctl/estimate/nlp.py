@@ -66,11 +66,45 @@ def default_substeps(dt: float) -> int:
     return max(1, math.ceil(dt / 60.0))
 
 
-def _ipopt_options(ipopt_options, progress, cb):
-    opts = {"ipopt": {**IPOPT_DEFAULTS, **(ipopt_options or {})}, "print_time": False}
-    if progress is not None and cb is not None:
+def _ipopt_solver(name, nlp, n_variables, n_constraints, ipopt_options=None, progress=None,
+                  **functions):
+    """IPOPT on ``nlp`` with ``ipopt_options`` merged over :data:`IPOPT_DEFAULTS`.
+
+    ``functions`` are further ``nlpsol`` options (``grad_f``, ``jac_g``, ``hess_lag``
+    callbacks). Returns ``(solver, callback)``; ``callback`` reports ``progress`` once per
+    iteration (None without ``progress``) and must stay referenced as long as ``solver``.
+    """
+    ipopt = {**IPOPT_DEFAULTS, **(ipopt_options or {})}
+    opts = {"ipopt": ipopt, "print_time": False, **functions}
+    cb = None
+    if progress:
+        cb = _IterationCallback(n_variables, n_constraints, progress, ipopt["max_iter"])
         opts["iteration_callback"] = cb
-    return opts
+    return ca.nlpsol(name, "ipopt", nlp, opts), cb
+
+
+def _run_ipopt(solver, cb, x0, lbx, ubx, lbg, ubg):
+    """``(sol, stats)`` of one IPOPT run (the progress count restarts from 0)."""
+    if cb is not None:
+        cb.k = 0
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    return sol, solver.stats()
+
+
+def _ipopt_result(sol, stats, f_scale, w, eta, delta, J=None, lbg=None, ubg=None) -> dict:
+    """The dict every NLP's ``solve`` returns (keys: :meth:`CasadiMultipleShootingNLP.solve`).
+
+    ``J`` defaults to the objective ``f`` [K²]; without ``lbg``/``ubg`` the constraint
+    violation is reported as 0.
+    """
+    f = float(sol["f"]) * f_scale
+    viol = 0.0
+    if lbg is not None:
+        g = np.asarray(sol["g"]).ravel()
+        viol = float(np.max(np.maximum(lbg - g, g - ubg), initial=0.0))
+    return {"w": w, "eta": eta, "delta": delta, "f": f, "J": f if J is None else J,
+            "status": stats["return_status"], "success": bool(stats["success"]),
+            "iterations": int(stats["iter_count"]), "max_violation": viol}
 
 
 class _IterationCallback(ca.Callback):
@@ -211,12 +245,8 @@ class CasadiMultipleShootingNLP:
         n_eq = n * T + ne * (T - 1)
         self.lbg = np.concatenate([np.zeros(n_eq), pb.tau_lb])
         self.ubg = np.concatenate([np.zeros(n_eq), pb.tau_ub])
-        opts = {**IPOPT_DEFAULTS, **(ipopt_options or {})}
-        cb = _IterationCallback(self.n_variables, self.n_constraints, progress,
-                                opts["max_iter"]) if progress else None
-        self._cb = cb
-        self.solver = ca.nlpsol("multiple_shooting", "ipopt", self.nlp,
-                                _ipopt_options(ipopt_options, progress, cb))
+        self.solver, self._cb = _ipopt_solver("multiple_shooting", self.nlp, self.n_variables,
+                                              self.n_constraints, ipopt_options, progress)
         self.discretisation = f"Radau IIA implicit, {s} sub-steps of {h:g} s per data step"
 
     def _step_function(self, h):
@@ -251,8 +281,7 @@ class CasadiMultipleShootingNLP:
         pb = self.problem
         eta = np.asarray(eta, dtype=float)
         delta = np.zeros(pb.n_free) if delta is None else np.asarray(delta, dtype=float)
-        x0 = pb.x0_ref.copy()
-        x0[pb.free_index] += delta
+        x0 = pb.start_state(delta)
         Xs = radau_substeps(pb, eta, x0, self.substeps)
         # vec(X) is column-major, i.e. the rows of Xs one after the other
         return np.concatenate([eta, delta, Xs.ravel(), np.tile(eta, self.T - 1)])
@@ -273,19 +302,12 @@ class CasadiMultipleShootingNLP:
             ``w``, ``eta``, ``delta``, ``f`` (objective [K²]), ``J`` (the discretised J [K²]),
             ``status``, ``success``, ``iterations``, ``max_violation`` [K].
         """
-        if self._cb is not None:
-            self._cb.k = 0
-        sol = self.solver(x0=w0, lbx=self.lbx if lbx is None else lbx,
-                          ubx=self.ubx if ubx is None else ubx, lbg=self.lbg, ubg=self.ubg)
-        st = self.solver.stats()
+        sol, st = _run_ipopt(self.solver, self._cb, w0, self.lbx if lbx is None else lbx,
+                             self.ubx if ubx is None else ubx, self.lbg, self.ubg)
         w = np.asarray(sol["x"]).ravel()
         eta, delta, _ = self.unpack(w)
-        g = np.asarray(sol["g"]).ravel()
-        viol = float(np.max(np.maximum(self.lbg - g, g - self.ubg), initial=0.0))
-        return {"w": w, "eta": eta, "delta": delta, "f": float(sol["f"]) * self.f_scale,
-                "J": float(self.J_fun(w)), "status": st["return_status"],
-                "success": bool(st["success"]), "iterations": int(st["iter_count"]),
-                "max_violation": viol}
+        return _ipopt_result(sol, st, self.f_scale, w, eta, delta, J=float(self.J_fun(w)),
+                             lbg=self.lbg, ubg=self.ubg)
 
 
 # ---------------------------------------------------------------------------- single shooting
@@ -400,12 +422,9 @@ class SingleShootingNLP:
                      _CB("hess_J", "hess", ev, ne)]
         x = ca.MX.sym("eta", ne)
         self.nlp = {"x": x, "f": self._cbs[0](x), "g": ca.mtimes(ca.DM(pb.tau_matrix), x)}
-        opts = {**IPOPT_DEFAULTS, **(ipopt_options or {})}
-        cb = _IterationCallback(ne, ev.ng, progress, opts["max_iter"]) if progress else None
-        self._cb = cb
-        o = _ipopt_options(ipopt_options, progress, cb)
-        o.update({"grad_f": self._cbs[1], "hess_lag": self._cbs[2]})
-        self.solver = ca.nlpsol("single_shooting", "ipopt", self.nlp, o)
+        self.solver, self._cb = _ipopt_solver("single_shooting", self.nlp, ne, ev.ng,
+                                              ipopt_options, progress,
+                                              grad_f=self._cbs[1], hess_lag=self._cbs[2])
         self.n_variables = ne
         self.n_constraints = ev.ng
         self.discretisation = pb.simulator.description
@@ -413,14 +432,8 @@ class SingleShootingNLP:
     def solve(self, eta0, lbx=None, ubx=None) -> dict:
         """Run IPOPT from ``eta0`` (see :meth:`CasadiMultipleShootingNLP.solve` for the keys)."""
         pb = self.problem
-        if self._cb is not None:
-            self._cb.k = 0
         eta0 = np.asarray(eta0, dtype=float)
-        sol = self.solver(x0=eta0, lbx=pb.eta_lb if lbx is None else lbx,
-                          ubx=pb.eta_ub if ubx is None else ubx, lbg=pb.tau_lb, ubg=pb.tau_ub)
-        st = self.solver.stats()
+        sol, st = _run_ipopt(self.solver, self._cb, eta0, pb.eta_lb if lbx is None else lbx,
+                             pb.eta_ub if ubx is None else ubx, pb.tau_lb, pb.tau_ub)
         eta = np.asarray(sol["x"]).ravel()
-        f = float(sol["f"]) * self.f_scale
-        return {"w": eta, "eta": eta, "delta": None, "f": f, "J": f,
-                "status": st["return_status"], "success": bool(st["success"]),
-                "iterations": int(st["iter_count"]), "max_violation": 0.0}
+        return _ipopt_result(sol, st, self.f_scale, eta, eta, None)

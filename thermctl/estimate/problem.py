@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import DataError, EstimationError
 from ..model import ThermalModel
 from ..network import ThermalNetwork
+from ._data import check_network, grid_arrays, inputs_from_frame, regular_step
 
 __all__ = ["EstimationData", "CostProblem", "INITIAL_STATES", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
 
@@ -80,24 +81,12 @@ class EstimationData:
     time: np.ndarray | None = None
 
     def __post_init__(self):
-        self.U = np.atleast_2d(np.asarray(self.U, dtype=float))
-        self.Y = np.asarray(self.Y, dtype=float)
-        if self.Y.ndim == 1:
-            self.Y = self.Y[:, None]
         self.zones = [str(z) for z in self.zones]
         self.input_names = [str(n) for n in self.input_names]
-        self.dt = float(self.dt)
-        if not (math.isfinite(self.dt) and self.dt > 0):
-            raise DataError(f"dt must be a positive step [s], found {self.dt}")
-        if self.U.shape[0] != self.Y.shape[0]:
-            raise DataError(f"U has {self.U.shape[0]} rows but Y has {self.Y.shape[0]}; "
-                            "they must share the time grid")
+        self.U, self.Y, self.dt = grid_arrays(self.U, self.Y, self.dt, self.zones)
         if self.U.shape[1] != len(self.input_names):
             raise DataError(f"U has {self.U.shape[1]} columns but {len(self.input_names)} "
                             "input names were given")
-        if self.Y.shape[1] != len(self.zones):
-            raise DataError(f"Y has {self.Y.shape[1]} columns but {len(self.zones)} zone names "
-                            f"were given ({self.zones})")
         if len(set(self.zones)) != len(self.zones):
             raise DataError(f"zones listed twice in {self.zones}")
 
@@ -167,39 +156,11 @@ class EstimationData:
         cols = set(frame.columns)
         n = len(frame)
         if dt is None:
-            idx = frame.index
-            if not hasattr(idx, "asi8") or n < 2:
+            if not hasattr(frame.index, "asi8") or n < 2:
                 raise DataError("from_frame: give dt [s]; the table has no DatetimeIndex "
                                 "to read the step from")
-            steps = np.asarray((idx[1:] - idx[:-1]).total_seconds(), dtype=float)
-            if not np.allclose(steps, steps[0]):
-                raise DataError("from_frame: the time index is not regular "
-                                f"(steps from {steps.min()} to {steps.max()} s); resample first")
-            dt = float(steps[0])
-        for b in network.boundary:
-            if f"T:{b}" not in cols:
-                raise DataError(f"column 'T:{b}' missing: boundary node {b!r} needs its "
-                                "measured temperature")
-        ms, ts, q = [], [], []
-        gains_known = False
-        for z in network.zones:
-            if f"ms:{z}" in cols:
-                if f"Ts:{z}" not in cols:
-                    raise DataError(f"column 'Ts:{z}' missing: zone {z!r} has a supply flow "
-                                    f"'ms:{z}' but no supply temperature")
-                ms.append(frame[f"ms:{z}"].to_numpy(float))
-                ts.append(frame[f"Ts:{z}"].to_numpy(float))
-            else:
-                log.info("zone %s has no 'ms:%s' column: no supply air", z, z)
-                ms.append(np.zeros(n))
-                ts.append(np.full(n, 20.0))   # multiplied by ms = 0
-            if f"Q:{z}" in cols:
-                q.append(frame[f"Q:{z}"].to_numpy(float))
-                gains_known = True
-            else:
-                q.append(np.zeros(n))
-        tb = [frame[f"T:{b}"].to_numpy(float) for b in network.boundary]
-        U = np.column_stack(ms + ts + tb + q)
+            dt = regular_step(frame.index, "from_frame")
+        U, gains_known = inputs_from_frame(frame, network)
         if zones is None:
             zones = [z for z in network.zones if f"T:{z}" in cols]
         else:
@@ -215,13 +176,7 @@ class EstimationData:
 
     def check(self, network: ThermalNetwork) -> None:
         """Raise :class:`DataError` unless these data fit ``network``."""
-        if self.input_names != network.input_names:
-            raise DataError(f"inputs do not match the network: expected {network.input_names}, "
-                            f"found {self.input_names}")
-        unknown = [z for z in self.zones if z not in network.zones]
-        if unknown:
-            raise DataError(f"measured zone(s) {unknown} are not zones of the network "
-                            f"({network.zones})")
+        check_network(self, network)
 
 
 @dataclass
@@ -460,6 +415,19 @@ class CostProblem:
                                         if not (i < net.n_zones and fixed[i])], dtype=int)
         else:
             self.free_index = np.zeros(0, dtype=int)
+
+    def start_state(self, delta=None) -> np.ndarray:
+        """Initial state [°C]: :attr:`x0_ref` plus ``delta`` [K] on the free states.
+
+        Parameters
+        ----------
+        delta : array_like, shape (n_free,), optional
+            Deviation of the free initial states (``initial_state="estimate"``) [K].
+        """
+        x0 = self.x0_ref.copy()
+        if delta is not None:
+            x0[self.free_index] += delta
+        return x0
 
     # ---- parameters ----------------------------------------------------------
     @property

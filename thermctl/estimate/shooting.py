@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import EstimationError
-from .nlp import IPOPT_DEFAULTS, _RMS_SCALE, _IterationCallback, _ipopt_options
+from .nlp import _RMS_SCALE, _ipopt_result, _ipopt_solver, _run_ipopt
 from .sim import _single_threaded_blas
 
 __all__ = ["MultipleShootingNLP", "DEFAULT_INTERVAL"]
@@ -205,13 +205,9 @@ class MultipleShootingNLP:
         self.ubx = np.concatenate([pb.eta_ub, np.full(nf + self.n_cont, inf)])
         self.lbg = np.concatenate([np.zeros(self.n_cont), pb.tau_lb])
         self.ubg = np.concatenate([np.zeros(self.n_cont), pb.tau_ub])
-        opts = {**IPOPT_DEFAULTS, **(ipopt_options or {})}
-        it = _IterationCallback(self.n_variables, self.n_constraints, progress,
-                                opts["max_iter"]) if progress else None
-        self._cb = it
-        o = _ipopt_options(ipopt_options, progress, it)
-        o.update({"grad_f": cb["grad_f"], "jac_g": cb["jac_g"], "hess_lag": cb["hess"]})
-        self.solver = ca.nlpsol("multiple_shooting", "ipopt", self.nlp, o)
+        self.solver, self._cb = _ipopt_solver(
+            "multiple_shooting", self.nlp, self.n_variables, self.n_constraints, ipopt_options,
+            progress, grad_f=cb["grad_f"], jac_g=cb["jac_g"], hess_lag=cb["hess"])
         self.discretisation = (f"{sim.description}; {NI} shooting intervals of {M} steps, "
                                "Gauss–Newton Hessian")
 
@@ -289,8 +285,7 @@ class MultipleShootingNLP:
             blocks = []
             for i in range(self.NI):
                 if i == 0:
-                    x = pb.x0_ref.copy()
-                    x[pb.free_index] += w[ne:ne + nf]
+                    x = pb.start_state(w[ne:ne + nf])
                     X = np.zeros((n, 1 + ne + nf))
                     X[pb.free_index, 1 + ne + np.arange(nf)] = 1.0
                 else:
@@ -358,8 +353,7 @@ class MultipleShootingNLP:
         pb = self.problem
         eta = np.asarray(eta, dtype=float)
         delta = np.zeros(pb.n_free) if delta is None else np.asarray(delta, dtype=float)
-        x0 = pb.x0_ref.copy()
-        x0[pb.free_index] += delta
+        x0 = pb.start_state(delta)
         X = self.sim.trajectory(eta, x0)
         return np.concatenate([eta, delta, X[self.nodes[1:]].ravel()])
 
@@ -372,19 +366,12 @@ class MultipleShootingNLP:
 
     def solve(self, w0, lbx=None, ubx=None) -> dict:
         """Run IPOPT from ``w0`` (keys as :meth:`~.nlp.CasadiMultipleShootingNLP.solve`)."""
-        if self._cb is not None:
-            self._cb.k = 0
-        sol = self.solver(x0=w0, lbx=self.lbx if lbx is None else lbx,
-                          ubx=self.ubx if ubx is None else ubx, lbg=self.lbg, ubg=self.ubg)
-        st = self.solver.stats()
+        sol, st = _run_ipopt(self.solver, self._cb, w0, self.lbx if lbx is None else lbx,
+                             self.ubx if ubx is None else ubx, self.lbg, self.ubg)
         w = np.asarray(sol["x"]).ravel()
         if not np.all(np.isfinite(w)):
             raise EstimationError("IPOPT returned non-finite decision variables "
                                   f"(status {st['return_status']})")
         eta, delta, _ = self.unpack(w)
-        g = np.asarray(sol["g"]).ravel()
-        viol = float(np.max(np.maximum(self.lbg - g, g - self.ubg), initial=0.0))
-        return {"w": w, "eta": eta, "delta": delta, "f": float(sol["f"]) * self.f_scale,
-                "J": self._eval(w)["J"], "status": st["return_status"],
-                "success": bool(st["success"]), "iterations": int(st["iter_count"]),
-                "max_violation": viol}
+        return _ipopt_result(sol, st, self.f_scale, w, eta, delta, J=self._eval(w)["J"],
+                             lbg=self.lbg, ubg=self.ubg)

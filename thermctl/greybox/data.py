@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError
+from ..estimate._data import check_network, grid_arrays, inputs_from_frame, regular_step
 from ..network import ThermalNetwork
 
 __all__ = ["GreyboxData"]
@@ -59,19 +60,8 @@ class GreyboxData:
     time: pd.DatetimeIndex | None = None
 
     def __post_init__(self):
-        self.U = np.atleast_2d(np.asarray(self.U, dtype=float))
-        self.Y = np.asarray(self.Y, dtype=float)
-        if self.Y.ndim == 1:
-            self.Y = self.Y[:, None]
+        self.U, self.Y, self.dt = grid_arrays(self.U, self.Y, self.dt, self.zones)
         N = self.U.shape[0]
-        if self.Y.shape[0] != N:
-            raise DataError(f"U has {N} rows but Y has {self.Y.shape[0]}; they share the time grid")
-        if self.Y.shape[1] != len(self.zones):
-            raise DataError(f"Y has {self.Y.shape[1]} columns but {len(self.zones)} zones were "
-                            f"named ({self.zones})")
-        if not (np.isfinite(self.dt) and self.dt > 0):
-            raise DataError(f"dt must be a positive step [s], found {self.dt}")
-        self.dt = float(self.dt)
         if self.solar is None:
             self.solar = np.zeros((N, 0))
         self.solar = np.asarray(self.solar, dtype=float).reshape(N, -1)
@@ -142,12 +132,8 @@ class GreyboxData:
             idx = frame.index
             if not isinstance(idx, pd.DatetimeIndex) or len(idx) < 2:
                 raise DataError("from_measurements: the table needs a regular DatetimeIndex")
-            steps = np.asarray((idx[1:] - idx[:-1]).total_seconds(), dtype=float)
-            if not np.allclose(steps, steps[0]):
-                raise DataError("from_measurements: the time index is not regular; resample "
-                                "with thermctl.data.read_measurements first")
-            dt = float(steps[0])
-            U = _inputs_from_frame(frame, network)
+            dt = regular_step(idx, "from_measurements")
+            U, _ = inputs_from_frame(frame, network)
         cols = set(frame.columns)
         if zones is None:
             zones = [z for z in network.measured_zones if f"T:{z}" in cols]
@@ -171,16 +157,7 @@ class GreyboxData:
     # ---- checks and slicing -----------------------------------------------------------
     def check(self, network: ThermalNetwork) -> None:
         """Raise :class:`DataError` unless these data fit ``network``'s spec."""
-        if list(self.input_names) != list(network.input_names):
-            raise DataError(f"inputs do not match the network: expected {network.input_names}, "
-                            f"found {self.input_names}")
-        unknown = [z for z in self.zones if z not in network.zones]
-        if unknown:
-            raise DataError(f"measured zone(s) {unknown} are not zones of the network "
-                            f"({network.zones})")
-        if self.U.shape[1] != network.n_inputs:
-            raise DataError(f"U has {self.U.shape[1]} columns, the network has "
-                            f"{network.n_inputs} inputs")
+        check_network(self, network)
 
     def window(self, start: int, stop: int | None = None) -> "GreyboxData":
         """Rows ``start:stop`` (sample indices)."""
@@ -200,25 +177,3 @@ class GreyboxData:
         e = np.flatnonzero(np.diff(ok))
         return [(int(a), int(b)) for a, b in zip(e[::2], e[1::2]) if b - a >= min_length]
 
-
-def _inputs_from_frame(frame: pd.DataFrame, network: ThermalNetwork) -> np.ndarray:
-    cols = set(frame.columns)
-    n = len(frame)
-    ms, ts, q = [], [], []
-    for z in network.zones:
-        if f"ms:{z}" in cols:
-            if f"Ts:{z}" not in cols:
-                raise DataError(f"column 'Ts:{z}' missing: zone {z!r} has 'ms:{z}' but no "
-                                "supply temperature")
-            ms.append(frame[f"ms:{z}"].to_numpy(float))
-            ts.append(frame[f"Ts:{z}"].to_numpy(float))
-        else:
-            ms.append(np.zeros(n))
-            ts.append(np.full(n, 20.0))     # multiplied by ms = 0
-        q.append(frame[f"Q:{z}"].to_numpy(float) if f"Q:{z}" in cols else np.zeros(n))
-    tb = []
-    for b in network.boundary:
-        if f"T:{b}" not in cols:
-            raise DataError(f"column 'T:{b}' missing: boundary node {b!r} needs its temperature")
-        tb.append(frame[f"T:{b}"].to_numpy(float))
-    return np.column_stack(ms + ts + tb + q)

@@ -140,14 +140,9 @@ def load_truth(path) -> Truth:
     >>> truth.edges[0]                             # doctest: +SKIP
     ('r240', 'r243', 2.8)
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: truth file not found")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise DataError(f"{path}: not valid JSON: {exc}") from None
-    return Truth.from_dict(data, source=str(path))
+    from ..io import read_json_file
+
+    return Truth.from_dict(read_json_file(path, "truth file", DataError), source=str(Path(path)))
 
 
 def quantise_temperature(t, quantum_F: float):
