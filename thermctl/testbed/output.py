@@ -10,7 +10,6 @@ of the whole export (every column of a row empty).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
