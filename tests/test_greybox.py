@@ -366,3 +366,28 @@ def test_sin_then_likelihood_selection_on_testbed():
         res = select_edges(tb.spec, tb.data, candidates="sin", direction="backward")
     assert {e[:2] for e in res.edges} == {tuple(sorted(e[:2])) for e in tb.truth.edges}
     assert res.estimator.rbar_v_ == pytest.approx(tb.truth.rbar_v, rel=0.25)
+
+
+def test_verdict_texts_for_one_sided_and_bound_intervals():
+    from types import SimpleNamespace
+
+    from thermctl.greybox.uncertainty import ParameterInterval, _cv_verdict, _verdict
+    # profile closed below by the data, open above: "bounded below only", names the bound
+    iv = ParameterInterval("rbar_v", 3e-4, 2e-4, 1e-2, 0.9, "profile", "K/(W m)",
+                           closed_lower=True, closed_upper=False)
+    v = _verdict(iv, None)
+    assert "bounded below only" in v and "0.01" in v and "down/up" not in v
+    iv = ParameterInterval("rbar_v", 3e-4, 1e-6, 4e-4, 0.9, "profile", "K/(W m)",
+                           closed_lower=False, closed_upper=True)
+    assert "bounded above only" in _verdict(iv, None)
+    est = SimpleNamespace(rbar_v_=2.6e-4)
+    # τ0 on its upper bound, data close it below: C_v is the bound's, said so with the number
+    tau = ParameterInterval("tau0", 2.03, 2.02, 2.03, 0.9, "profile", "s/m",
+                            closed_lower=True, closed_upper=False)
+    v = _cv_verdict(tau, est)
+    assert "sits on its search bound" in v and f"{2.03 / 2.6e-4:.3g}" in v
+    # open on both sides: the whole range fits equally well
+    tau = ParameterInterval("tau0", 2.03, 0.405, 2.03, 0.9, "profile", "s/m",
+                            closed_lower=False, closed_upper=False)
+    v = _cv_verdict(tau, est)
+    assert f"[{0.405 / 2.6e-4:.3g}, {2.03 / 2.6e-4:.3g}] J/K" in v

@@ -394,9 +394,11 @@ def _verdict(iv: ParameterInterval, pb) -> str:
         return (f"{head}: NOT identifiable from these data — the criterion changes by less than "
                 f"the {100 * iv.level:.0f} % threshold over the whole allowed range; the value is "
                 "where the optimiser stopped, not a measurement.")
-    side = "below" if not iv.closed_lower else "above"
-    return (f"{head}: only bounded on one side — the data cannot tell values {side} the "
-            f"estimate from it down/up to the search bound.")
+    if not iv.closed_lower:
+        return (f"{head}: bounded above only — the data cannot tell the estimate from any "
+                f"smaller value down to the search bound {_fmt(iv.lower)} {iv.unit}.")
+    return (f"{head}: bounded below only — the data cannot tell the estimate from any "
+            f"larger value up to the search bound {_fmt(iv.upper)} {iv.unit}.")
 
 
 def _cv_verdict(tau: ParameterInterval, est) -> str:
@@ -405,6 +407,16 @@ def _cv_verdict(tau: ParameterInterval, est) -> str:
     if tau.identifiable:
         return (f"C_v = {_fmt(tau.value / rb)} J/K (from τ0 and R̄_v), interval about "
                 f"[{_fmt(lo)}, {_fmt(hi)}] J/K: identified.")
+    # one side closed by the data, the other open with the estimate on it: the bound decides
+    on_bound = (tau.closed_lower and not tau.closed_upper
+                and tau.upper - tau.value <= 1e-3 * tau.upper) or \
+        (tau.closed_upper and not tau.closed_lower and tau.value - tau.lower <= 1e-3 * tau.lower)
+    if on_bound:
+        return (f"C_v: not identifiable — τ0 = R̄_v·C_v sits on its search bound "
+                f"({_fmt(tau.value)} s/m, from t_min/α or t_max/α), so C_v = τ0/R̄_v = "
+                f"{_fmt(tau.value / rb)} J/K is set by that bound, not by the data; the convection "
+                "edge's own time constant (seconds) is far below the data step, so the data only "
+                "see its resistance. The reported C_v is not a measurement.")
     return (f"C_v: not identifiable — any value in about [{_fmt(lo)}, {_fmt(hi)}] J/K "
             f"(τ0 ∈ [{_fmt(tau.lower)}, {_fmt(tau.upper)}] s/m) fits as well; the convection "
             "edge's own time constant (seconds) is far below the data step, so the data only "
