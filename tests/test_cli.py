@@ -198,3 +198,16 @@ def test_every_command_has_help_with_example(cmd):
     res = run(cmd, "--help")
     assert res.exit_code == 0
     assert "Example" in res.output
+
+
+def test_misfit_note_only_when_innovations_are_far_from_white():
+    from types import SimpleNamespace
+
+    from thermctl.identify import IdentifyOptions, _misfit_note
+    notes = []
+    white = SimpleNamespace(intervals={"rbar_v": SimpleNamespace(inflation=1.4)})
+    _misfit_note(white, IdentifyOptions(), notes)
+    assert notes == []
+    bad = SimpleNamespace(intervals={"rbar_v": SimpleNamespace(inflation=246.0)})
+    _misfit_note(bad, IdentifyOptions(), notes)
+    assert len(notes) == 1 and "variance ratio 246" in notes[0] and "--selection-criterion holdout" in notes[0]

@@ -61,6 +61,8 @@ def identify(
                                   "forced by --criterion simulation)."),
     candidates: str = typer.Option("sin", help="--selection model: sin (SIN picks, walls allowed) or all pairs."),
     margin: float = typer.Option(10.0, help="--selection model: BIC improvement an edge must bring."),
+    selection_criterion: str = typer.Option("bic", help="--selection model: bic, aic or holdout "
+                                            "(likelihood of the last 30 % of the calibration days)."),
     solar: bool = typer.Option(True, help="Per-zone solar apertures on the data's solar: columns."),
     intervals: str = typer.Option("profile", help="Intervals for R̄_v and τ0: profile, wald or none."),
     method: str = typer.Option("sin", help="Concentration graphs: sin (paper) or glasso."),
@@ -95,8 +97,9 @@ def identify(
     meas = read_measurements(data, spec, units=units, gap_limit=gap_limit)
     console.print(meas.quality.summary(), highlight=False)
     opt = IdentifyOptions(criterion=criterion, selection=selection, candidates=candidates,
-                          margin=margin, solar=solar, intervals=intervals, structure_method=method, level=level, rule=rule, s_min=s_min,
-                          allow_parallel=allow_parallel, estimator=estimator,
+                          margin=margin, selection_criterion=selection_criterion, solar=solar,
+                          intervals=intervals, structure_method=method, level=level, rule=rule,
+                          s_min=s_min, allow_parallel=allow_parallel, estimator=estimator,
                           window_hours=window_hours, initial_state=initial_state, grid=grid,
                           calibration=_window(calibration, "--calibration"),
                           validation=_window(validation, "--validation"))
@@ -376,6 +379,7 @@ def demo(
     console.rule("2/4 identify")
     ident = identify(paths["data"], building=paths["building"], out=out, units="si",
                      criterion="likelihood", selection="model", candidates="sin", margin=10.0,
+                     selection_criterion="bic",
                      solar=True, intervals="profile", method="sin",
                      rule="paper", s_min=0.25, level=0.05, allow_parallel=False, estimator="nlp",
                      window_hours=12.0, initial_state="paper", grid=True, calibration=None,
