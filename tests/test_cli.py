@@ -211,3 +211,25 @@ def test_misfit_note_only_when_innovations_are_far_from_white():
     bad = SimpleNamespace(intervals={"rbar_v": SimpleNamespace(inflation=246.0)})
     _misfit_note(bad, IdentifyOptions(), notes)
     assert len(notes) == 1 and "variance ratio 246" in notes[0] and "--selection-criterion holdout" in notes[0]
+
+
+@pytest.mark.slow
+def test_identify_sin_plus_pairs(tb_dir, tmp_path):
+    """SIN picks as the start, forward over every measured pair, backward: the true paths."""
+    res = run("identify", tb_dir / "data.csv", "--building", tb_dir / "building.yaml",
+              "--out", tmp_path, "--candidates", "sin+pairs", "--intervals", "none")
+    assert res.exit_code == 0, res.output
+    ident = json.loads((tmp_path / "identification.json").read_text())
+    truth = json.loads((tb_dir / "truth.json").read_text())
+    true_pairs = {tuple(sorted((e["a"], e["b"]))) for e in truth["edges"]}
+    found = {tuple(sorted((e["a"], e["b"]))) for e in ident["structure"]["edges"]}
+    assert true_pairs <= found and len(found - true_pairs) <= 1, (found, true_pairs)
+    # every measured pair was a candidate: 6 measured zones → 15 pairs
+    assert len(ident["structure"]["selection"]["candidates"]) == 15
+
+
+def test_identify_rejects_unknown_option_value(tb_dir, tmp_path):
+    res = run("identify", tb_dir / "data.csv", "--building", tb_dir / "building.yaml",
+              "--out", tmp_path / "o", "--candidates", "everything")
+    assert res.exit_code == 2 and "candidates must be one of" in res.output
+    assert not (tmp_path / "o").exists()

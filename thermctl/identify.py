@@ -54,10 +54,13 @@ class IdentifyOptions:
         ``model``: candidates pruned by an information criterion on the likelihood
         (:func:`thermctl.greybox.select_edges`); ``scores``: the paper's rule on the SIN
         scores alone (forced with ``criterion="simulation"``).
-    candidates : {"sin", "all"}
+    candidates : {"sin", "sin+pairs", "all"}
         Candidates of the model-based selection: the union of SIN's argmax and threshold
-        picks (walls allowed), or every pair with a known or estimable air path length.
-        With too few days for SIN, ``all`` is used (noted).
+        picks (walls allowed), pruned backward; ``sin+pairs``: those picks as the start,
+        then forward over every pair of measured zones and backward again (finds pairs SIN
+        misses, e.g. beside an open door; slower); ``all``: every pair with a known or
+        estimable air path length, forward then backward. With too few days for SIN,
+        ``all`` is used (noted).
     selection_criterion : {"bic", "aic", "holdout"}
     margin : float
         Criterion improvement an edge must bring to stay in the model [-].
@@ -113,7 +116,7 @@ class IdentifyOptions:
 
     def check(self):
         for name, allowed in (("criterion", CRITERIA), ("selection", SELECTIONS),
-                              ("candidates", ("sin", "all")),
+                              ("candidates", ("sin", "sin+pairs", "all")),
                               ("selection_criterion", ("bic", "aic", "holdout")),
                               ("intervals", ("profile", "wald", "none")),
                               ("estimator", ("nlp", "single_shooting", "grid", "none"))):
@@ -246,8 +249,8 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
     net0 = ThermalNetwork(spec)
     notes = []
     sid = None
-    cands = None
-    if opt.candidates == "sin":
+    cands = start = None
+    if opt.candidates in ("sin", "sin+pairs"):
         if progress:
             progress("structure", 0, 1)
         try:
@@ -266,6 +269,13 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
             picks |= {tuple(sorted((e.a, e.b))) for e in rule_edges(
                 {p: sid.scores_[p] for p in dist}, dist, sid.zones_, "threshold", opt.s_min)}
             cands = sorted(picks)
+            if opt.candidates == "sin+pairs":
+                # SIN's picks are the start; every measured pair may still enter, and the
+                # backward pass may still drop a pick (SIN misses pairs whose partial
+                # correlation another path hides, e.g. beside an open door)
+                start = cands
+                cands = sorted(set(cands) | {c.pair for c in candidate_pairs(
+                    spec, include_unmeasured=False)})
     if cands is None:
         cands = [c.pair for c in candidate_pairs(spec)]
     scores = {} if sid is None else {f"air:{a}-{b}": sid.scores_.get((a, b), float("nan"))
@@ -285,11 +295,12 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
 
         # from SIN's few picks: backward; from every pair: forward (cheaper and what
         # model-based selection does for small buildings)
-        direction = "backward" if sid is not None else "both"
+        direction = "backward" if sid is not None and start is None else "both"
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
             sel = select_edges(spec, cal, candidates=cands, criterion=opt.selection_criterion,
                                direction=direction, margin=opt.margin, progress=say,
+                               start=start or (),
                                final_criterion=opt.criterion, solar=opt.solar)
         net = ThermalNetwork(spec, sel.edges)
         if not sel.edges:

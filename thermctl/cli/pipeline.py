@@ -59,7 +59,8 @@ def identify(
     selection: str = typer.Option("model", help="Air paths: model (SIN candidates kept by BIC on the "
                                   "likelihood; default) or scores (the paper's rule on SIN scores; "
                                   "forced by --criterion simulation)."),
-    candidates: str = typer.Option("sin", help="--selection model: sin (SIN picks, walls allowed) or all pairs."),
+    candidates: str = typer.Option("sin", help="--selection model: sin (SIN picks, walls allowed, pruned), "
+                                   "sin+pairs (SIN picks, then forward over all measured pairs) or all."),
     margin: float = typer.Option(10.0, help="--selection model: BIC improvement an edge must bring."),
     selection_criterion: str = typer.Option("bic", help="--selection model: bic, aic or holdout "
                                             "(likelihood of the last 30 % of the calibration days)."),
