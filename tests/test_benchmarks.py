@@ -1,0 +1,177 @@
+"""Tests of benchmarks/identification.py: the quick run and the table's arithmetic.
+
+The quick run identifies a 3-zone building with one true air path (a–c) on 6 calibration
+days and validates on the 2 held-back days; the assertions are about what the table must
+hold (every method × criterion row, finite numbers where a measure applies), that no fit
+saw the validation days, and what the truth makes certain (the oracle against itself,
+recovery of R̄_v by the default criterion). The aggregation is checked against values
+computed by hand on made-up rows.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import io
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "identification.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_identification", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    # dataclasses resolve string annotations through sys.modules
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    yield mod
+    sys.modules.pop(spec.name, None)
+
+
+@pytest.fixture(scope="module")
+def quick(bench):
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        res = bench.main(["--quick"])
+    return res, out.getvalue()
+
+
+def _table_lines(text):
+    lines = text.splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("method"))
+    body = []
+    for ln in lines[i + 2:]:
+        if not ln.strip():
+            break
+        body.append(ln)
+    return lines[i], body
+
+
+def _cells(line, n_cells):
+    """The last ``n_cells`` whitespace-separated cells of a table line."""
+    return line.split()[-n_cells:]
+
+
+def test_quick_has_every_row(bench, quick):
+    res, text = quick
+    head, body = _table_lines(text)
+    for col in ("criterion", "R̄v err med", "cover", "step err", "val med", "val max", "recall",
+                "false/bld", "time s"):
+        assert col in head
+    assert len(body) == len(bench.ROWS)
+    for line, (method, crit) in zip(body, bench.ROWS):
+        assert line.startswith(f"{method:19s} {crit:18s}"), line
+        assert "failed" not in line, line
+    assert {(r.method, r.criterion) for r in res.rows} == set(bench.ROWS)
+    assert not [r.note for r in res.rows if r.note.startswith("failed")]
+    assert "targets (issue 11):" in text
+
+
+def test_quick_numbers_finite_where_they_apply(bench, quick):
+    res, text = quick
+    _, body = _table_lines(text)
+    n_cols = len(bench.COLUMNS)
+    by_key = dict(zip(bench.ROWS, (_cells(ln, n_cols) for ln in body)))
+    for (method, crit), cells in by_key.items():
+        c = dict(zip([k for k, *_ in bench.COLUMNS], cells))
+        assert c["n"] == "1"
+        # every model gets a step-response error and a validation ratio
+        assert c["step"].endswith("%") and c["val_med"].endswith("%"), (method, crit, c)
+        if method == bench.TRUE:
+            assert c["rbar_med"].endswith("%"), (method, crit, c)
+            assert c["recall"] == "—" and c["false"] == "—"
+        else:
+            recall, false = float(c["recall"]), float(c["false"])
+            assert 0.0 <= recall <= 1.0 and false >= 0.0
+    assert by_key[(bench.TRUE, bench.KAL)][3].endswith("%")      # interval coverage
+    for r in res.rows:
+        assert math.isfinite(r.step_err) and r.step_err >= 0.0, r
+        assert math.isfinite(r.val) and r.val > -1.0, r
+        assert r.val_zone in ("a", "b", "c"), r
+        if r.method == bench.TRUE:
+            assert math.isfinite(r.rbar_err), r
+        if r.method != bench.COND:
+            assert r.seconds > 0.0, r
+
+
+def test_quick_fits_never_see_the_validation_days(quick):
+    res, _ = quick
+    (b,) = res.buildings
+    step = pd.Timedelta(minutes=5)
+    cal0, cal1 = b.calibration
+    val0, val1 = b.validation
+    assert val0 == cal1 + step                     # contiguous, no overlap
+    assert val1 - val0 == pd.Timedelta(hours=48) - step
+    assert cal1 - cal0 == pd.Timedelta(days=6) - step
+    assert b.true_edges == [("a", "c")]
+
+
+def test_quick_truth_side(bench, quick):
+    res, _ = quick
+    rows = {(r.method, r.criterion): r for r in res.rows}
+    kal = rows[(bench.TRUE, bench.KAL)]
+    cond = rows[(bench.COND, "—")]
+    # recovery of the known R̄_v by the default criterion on the true structure; measured
+    # 6 % on this building (the issue's target is 25 %)
+    assert kal.rbar_err < 0.25
+    # the air path matters: ignoring it costs most of the step responses and open-loop
+    # accuracy (measured 61 % and +21 % here, against 0.7 % and +0.05 % for the fit)
+    assert cond.step_err > 0.3 > kal.step_err
+    assert cond.val > 0.05 > kal.val
+
+
+def test_validator_oracle_against_itself_is_zero(bench):
+    from thermctl.spec import spec_from_dict
+    from thermctl.testbed import generate
+    from thermctl.model import ThermalModel
+
+    tb = generate((spec_from_dict(bench.QUICK_SPEC), bench.QUICK_EDGES), days=3, seed=1,
+                  burn_in_days=1)
+    val = tb.data.iloc[-288:]
+    v = bench.Validator(tb, val)
+    ratio, _ = v.ratio(ThermalModel(tb.network, rbar_v=tb.truth.rbar_v, c_v=tb.truth.c_v))
+    assert ratio == pytest.approx(0.0, abs=1e-12)
+    assert set(v.oracle) == {"a", "b", "c"}
+    # quantised, noisy sensors: the oracle's error is at least the 0.05 K sensor noise
+    assert min(v.oracle.values()) > 0.03
+
+
+def test_summarize_by_hand(bench):
+    Row = bench.Row
+    rows = [Row("b/0", "SIN + argmax", "Kalman", rbar_err=0.1, step_err=0.05, val=0.01,
+                n_true=3, n_hit=2, false_edges=1, seconds=2.0),
+            Row("b/1", "SIN + argmax", "Kalman", rbar_err=0.3, step_err=0.15, val=-0.02,
+                n_true=1, n_hit=1, false_edges=0, seconds=3.0),
+            Row("b/2", "SIN + argmax", "Kalman", rbar_err=0.2, step_err=0.25, val=0.04,
+                n_true=2, n_hit=2, false_edges=2, seconds=1.0),
+            Row("b/0", "true edges", "Kalman", rbar_err=0.5, covered=1.0, step_err=0.2, val=0.0,
+                seconds=4.0),
+            Row("b/1", "true edges", "Kalman", covered=0.0, seconds=1.0, note="failed: X")]
+    s = bench.summarize(rows)
+    sin = s[("SIN + argmax", "Kalman")]
+    assert sin["recall"] == pytest.approx(5 / 6)    # pooled over edges, not a mean of ratios
+    assert sin["false"] == pytest.approx(1.0)
+    assert sin["rbar_med"] == pytest.approx(0.2)
+    assert sin["rbar_p90"] == pytest.approx(0.28)   # numpy's linear percentile of .1 .2 .3
+    assert sin["val_med"] == pytest.approx(0.01) and sin["val_max"] == pytest.approx(0.04)
+    assert sin["time"] == pytest.approx(6.0) and sin["failed"] == 0
+    tru = s[("true edges", "Kalman")]
+    assert tru["failed"] == 1 and tru["cover"] == pytest.approx(0.5) and tru["n_cover"] == 2
+    assert np.isnan(tru["recall"]) and tru["rbar_med"] == pytest.approx(0.5)
+    text = bench.table(rows)
+    assert "(1 failed)" in text
+    t = "\n".join(bench.targets(rows))
+    # SIN + argmax: recall 0.83 < 0.9 → fails the structure target; its median step
+    # error 15 % fails the 10 % target; validation max 4 % fails the 2 % target
+    assert "recall >= 0.9 and <= 0.2 false edges per building: none" in t
+    assert "median step-response error <= 10 %: none" in t
+    assert "median R̄v error <= 25 %: SIN + argmax × Kalman" in t
+    assert "48-h validation <= 2 % worse than the oracle on every zone of every building: " \
+           "true edges × Kalman" in t
