@@ -324,8 +324,11 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
         to stay) [-]. Default 10, "very strong" evidence on Kass & Raftery's BIC scale:
         the model is only approximately right (its innovations are not white, see
         :func:`~thermctl.greybox.uncertainty.wald_intervals`), which inflates likelihood
-        differences; measured on the testbed, true air paths improve BIC by 10²–10³ and
-        spurious ones by up to ~6.
+        differences; measured on the testbed, true air paths improve BIC by 10²–10³, and
+        spurious ones among SIN's picks by up to ~6 — but offered every pair (walls and the
+        unmeasured hallway included), BIC lets 2.3 false edges per building in, and on the
+        twin house every pair improves it by 10²–10⁴ (benchmarks/identification.py,
+        benchmarks/twinhouse.py): a good pruner, a poor gatekeeper.
     screen : {"grid", "fit"}
         How candidates are ranked before the best one is refitted: ``grid`` evaluates the
         likelihood at three R̄_v values per candidate with everything else held (one
