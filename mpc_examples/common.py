@@ -59,9 +59,9 @@ import pandas as pd
 
 from thermctl.spec import RHO_AIR
 
-__all__ = ["J_PER_KWH", "ComfortBand", "HVACModel", "Forecast", "MPCSolution", "ClosedLoopResult",
-           "kpis", "kpi_table", "format_table", "plot_closed_loop", "save_outputs",
-           "example_parser"]
+__all__ = ["J_PER_KWH", "ComfortBand", "HVACModel", "Forecast", "MPCSolution",
+           "RecedingHorizonMPC", "ClosedLoopResult", "kpis", "kpi_table", "format_table",
+           "plot_closed_loop", "save_outputs", "example_parser"]
 
 J_PER_KWH = 3.6e6
 
@@ -282,6 +282,67 @@ class MPCSolution:
     cost: float
 
 
+class RecedingHorizonMPC:
+    """What both MPCs share: the model, the energy model, the step, the horizon, which zones
+    are scored and supplied, and the previous solution (for the warm start).
+
+    Parameters
+    ----------
+    model : ThermalModel or thermctl.reduce.ReducedNetwork
+        The controller's model.
+    hvac : HVACModel
+        Its ``ms_min`` / ``ms_max`` have one entry per model zone.
+    comfort_zones : list of str
+        Zones whose temperature must stay in the band.
+    dt : float
+        MPC step [s], > 0.
+    horizon : int
+        Number of steps N, >= 1.
+    weights : dataclass
+        The formulation's penalty weights.
+
+    Attributes
+    ----------
+    zones : list of str
+    comfort_idx : ndarray of int
+        Model zone index of each comfort zone.
+    sup : ndarray of int
+        Model zone indices with a VAV box.
+    frac_min : ndarray, shape (len(sup),)
+        Ventilation minimum flow as a fraction of the box maximum [-].
+    """
+
+    def __init__(self, model, hvac: HVACModel, comfort_zones, dt: float, horizon: int, weights):
+        if int(horizon) != horizon or horizon < 1:
+            raise ValueError(f"horizon must be a positive integer, found {horizon!r}")
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0 [s], found {dt!r}")
+        net = model.network
+        self.model, self.hvac, self.weights = model, hvac, weights
+        self.dt, self.N = float(dt), int(horizon)
+        self.zones = list(net.zones)
+        unknown = [z for z in comfort_zones if z not in self.zones]
+        if unknown:
+            raise ValueError(f"comfort zones {unknown} are not zones of the model {self.zones}")
+        if len(hvac.ms_max) != net.n_zones or len(hvac.ms_min) != net.n_zones:
+            raise ValueError(f"hvac.ms_min / ms_max have {len(hvac.ms_min)} / "
+                             f"{len(hvac.ms_max)} values, the model has {net.n_zones} zones")
+        self.comfort_idx = np.array([self.zones.index(z) for z in comfort_zones], dtype=int)
+        self.sup = hvac.supplied
+        self.frac_min = (np.asarray(hvac.ms_min, float)[self.sup]
+                         / np.asarray(hvac.ms_max, float)[self.sup])
+        self._prev = None
+
+    def check_forecast(self, fc: "Forecast") -> None:
+        """Raise ``ValueError`` unless ``fc`` covers the horizon."""
+        if len(fc) < self.N:
+            raise ValueError(f"forecast covers {len(fc)} steps, the horizon needs {self.N}")
+
+    def reset(self) -> None:
+        """Forget the previous solution (the next solve starts cold)."""
+        self._prev = None
+
+
 @dataclass
 class ClosedLoopResult:
     """A closed-loop run on the plant, on the plant's step.
@@ -443,21 +504,27 @@ def example_parser(description: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=description,
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--hours", type=float, default=72.0,
-                   help="closed-loop length [h] (fast mode: --hours 6)")
+                   help="closed-loop length [h] (fast mode: --hours 3)")
     p.add_argument("--model", default="identified",
-                   help="the MPC's internal model(s), comma-separated: identified, true, "
+                   help="the MPC's internal model(s), comma-separated: identified (thermctl's "
+                        "default identification), paper (the paper's pipeline), true, "
                         "conduction-only (e.g. identified,true for the cost of model error)")
+    p.add_argument("--warmup", type=float, default=48.0,
+                   help="hours of the BAS log the Kalman filter replays before it takes over "
+                        "(0: start from the first reading with guessed wall states)")
     p.add_argument("--order", type=int, default=None,
                    help="reduce the MPC's model to this many states (structure-preserving: "
                         "zone temperatures stay states); default: the full model")
     p.add_argument("--zones", type=int, default=7,
                    help="7: Pugh Hall section; more: testbed corridor floor of about this size")
     p.add_argument("--seed", type=int, default=0, help="testbed seed")
-    p.add_argument("--step", type=float, default=15.0, help="MPC step [min]")
+    p.add_argument("--step", type=float, default=10.0,
+                   help="MPC step [min] (at 15 min, people leaving between two steps cost "
+                        "more discomfort; docs/mpc.md)")
     p.add_argument("--horizon", type=float, default=6.0, help="prediction horizon [h]")
-    p.add_argument("--backoff", type=float, default=0.2,
-                   help="the MPC keeps this far inside the comfort band [K] (sensor offsets "
-                        "of about 0.1 K and model error)")
+    p.add_argument("--backoff", type=float, default=0.35,
+                   help="the MPC keeps this far inside the comfort band [K]: sensor offsets "
+                        "(about 0.1 K) and what happens between two MPC steps (people leave)")
     p.add_argument("--start-day", type=int, default=None,
                    help="day of the testbed run to start on (default: the first Monday after "
                         "the identification days)")

@@ -3,11 +3,11 @@ r"""Economic nonlinear MPC of a VAV building with the identified (bilinear) CasA
 Run from the repository root::
 
     python -m mpc_examples.economic_mpc              # 3 days, identified model
-    python -m mpc_examples.economic_mpc --hours 6    # fast mode
-    python -m mpc_examples.economic_mpc --compare-true   # + the true model inside the MPC
+    python -m mpc_examples.economic_mpc --hours 3 --start-day 10 --start-hour 5   # fast mode
+    python -m mpc_examples.economic_mpc --model identified,true,conduction-only  # model error
 
 At every MPC step (default 15 min) the controller solves, over a horizon of N steps
-(default 8 h),
+(default 6 h),
 
 .. math::
 
@@ -52,7 +52,7 @@ import numpy as np
 
 from thermctl.model import ThermalModel
 
-from .common import Forecast, HVACModel, MPCSolution
+from .common import Forecast, HVACModel, MPCSolution, RecedingHorizonMPC
 
 __all__ = ["EconomicWeights", "EconomicMPC", "main"]
 
@@ -112,7 +112,7 @@ class _Blocks:
         return out
 
 
-class EconomicMPC:
+class EconomicMPC(RecedingHorizonMPC):
     """Economic NMPC on a :class:`~thermctl.model.ThermalModel` (see the module docstring).
 
     Parameters
@@ -147,24 +147,12 @@ class EconomicMPC:
                  weights: EconomicWeights = EconomicWeights(), max_iter: int = 300):
         if transcription not in ("implicit", "explicit"):
             raise ValueError(f"transcription must be 'implicit' or 'explicit', found {transcription!r}")
-        if int(horizon) != horizon or horizon < 1 or int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"horizon and substeps must be positive integers, found "
-                             f"{horizon!r}, {substeps!r}")
-        net = model.network
-        self.model, self.hvac, self.weights = model, hvac, weights
-        self.dt, self.N, self.s = float(dt), int(horizon), int(substeps)
+        if int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be a positive integer, found {substeps!r}")
+        super().__init__(model, hvac, comfort_zones, dt, horizon, weights)
+        self.s = int(substeps)
         self.transcription = transcription
         self.max_iter = int(max_iter)
-        self.zones = list(net.zones)
-        unknown = [z for z in comfort_zones if z not in self.zones]
-        if unknown:
-            raise ValueError(f"comfort zones {unknown} are not zones of the model {self.zones}")
-        self.comfort_idx = np.array([self.zones.index(z) for z in comfort_zones], dtype=int)
-        self.sup = hvac.supplied
-        if len(hvac.ms_max) != net.n_zones:
-            raise ValueError(f"hvac.ms_max has {len(hvac.ms_max)} values, the model has "
-                             f"{net.n_zones} zones")
-        self._prev = None
         t0 = time.perf_counter()
         self._build()
         self.build_time = time.perf_counter() - t0
@@ -269,8 +257,7 @@ class EconomicMPC:
         wb = self._wb
         lb = np.full(wb.size, -np.inf)
         ub = np.full(wb.size, np.inf)
-        frac_min = np.asarray(hv.ms_min, float)[self.sup] / np.asarray(hv.ms_max, float)[self.sup]
-        phi_lo = np.where(np.asarray(fc.hvac_on)[None, :], frac_min[:, None], 0.0)
+        phi_lo = np.where(np.asarray(fc.hvac_on)[None, :], self.frac_min[:, None], 0.0)
         ts_lo = np.repeat(np.asarray(fc.T_c, float)[None, :], ns, axis=0)
 
         def put(name, lo, hi):
@@ -289,8 +276,7 @@ class EconomicMPC:
         simulated with the model (zero shooting gaps), slacks and coil split to match."""
         wb, hv, N, s = self._wb, self.hvac, self.N, self.s
         net = self.model.network
-        frac = (np.asarray(hv.ms_min, float)[self.sup] / np.asarray(hv.ms_max, float)[self.sup])
-        phi = frac[:, None] * np.asarray(fc.hvac_on[:N], float)[None, :]
+        phi = self.frac_min[:, None] * np.asarray(fc.hvac_on[:N], float)[None, :]
         Ts = np.full((len(self.sup), N), 20.0)
         ms_all = np.zeros((N, net.n_zones))
         ms_all[:, self.sup] = (phi * np.asarray(hv.ms_max, float)[self.sup, None]).T
@@ -315,12 +301,10 @@ class EconomicMPC:
     def parameters(self, x0, fc: Forecast, u_prev=None) -> np.ndarray:
         """The NLP parameter vector for state ``x0`` [°C] and forecast ``fc``."""
         N, ns = self.N, len(self.sup)
-        if len(fc) < N:
-            raise ValueError(f"forecast covers {len(fc)} steps, the horizon needs {N}")
+        self.check_forecast(fc)
         if u_prev is None:  # nothing applied yet: the mode's minimum at the cold deck
-            frac_min = np.asarray(self.hvac.ms_min, float)[self.sup] / \
-                np.asarray(self.hvac.ms_max, float)[self.sup]
-            u_prev = np.concatenate([frac_min * bool(fc.hvac_on[0]), np.full(ns, fc.T_c[0])])
+            u_prev = np.concatenate([self.frac_min * bool(fc.hvac_on[0]),
+                                     np.full(ns, fc.T_c[0])])
         return np.concatenate([np.asarray(x0, float), fc.T_boundary[:N].T.ravel(order="F"),
                                fc.gains[:N].T.ravel(order="F"), fc.T_out[:N], fc.T_c[:N],
                                fc.lo[:N], fc.hi[:N], u_prev])
@@ -383,10 +367,6 @@ class EconomicMPC:
         """Energy [kWh], comfort penalty and move penalty of a solution vector."""
         e, c, m = self._diag(sol_vector, P)
         return {"energy": float(e), "comfort": float(c), "move": float(m)}
-
-    def reset(self) -> None:
-        """Forget the previous solution (next solve starts cold)."""
-        self._prev = None
 
 
 def _dynamics(model, substeps: int):

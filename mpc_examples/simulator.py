@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from thermctl.testbed import Plant, VAVController, generate
 
@@ -30,7 +31,8 @@ from .common import (ClosedLoopResult, ComfortBand, Forecast, HVACModel, example
                      format_table, kpi_table, plot_closed_loop, save_outputs)
 from .model import GainKalmanFilter, controller_model, reduced_model
 
-__all__ = ["Scenario", "make_scenario", "run_baseline", "run_mpc", "run_example"]
+__all__ = ["Scenario", "make_scenario", "run_baseline", "band_baseline", "make_controller",
+           "run_mpc", "run_example"]
 
 log = logging.getLogger(__name__)
 
@@ -87,8 +89,8 @@ class Scenario:
 
         Boundary temperatures: the logged values, averaged over each MPC step (perfect
         forecast of what the BAS records). Gains: ``gains`` [W] per zone held (the
-        Kalman filter's estimate). Cold deck: the current reading held. Comfort band at
-        the end of each step; occupied mode at its start.
+        Kalman filter's estimate). Cold deck: the current reading held. Comfort band at the end of
+        each step; occupied mode at its start.
         """
         d = self.tb.disturbances
         a = self.k0 + k
@@ -135,7 +137,6 @@ def make_scenario(zones: int = 7, seed: int = 0, hours: float = 72.0, horizon_ho
     band : ComfortBand
     """
     start = "2011-01-21"  # the paper's first day (a Friday)
-    import pandas as pd
     first = pd.Timestamp(start)
     if start_day is None:
         start_day = ID_DAYS + (7 - (first + pd.Timedelta(days=ID_DAYS)).day_of_week) % 7
@@ -207,7 +208,8 @@ def band_baseline(scn: Scenario, margin: float = 0.5) -> VAVController:
                          tb.controller.settings, scn.dt)
 
 
-def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.2,
+def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.35,
+            warmup_hours: float = 48.0,
             progress: bool = False) -> ClosedLoopResult:
     """Receding-horizon MPC with a :class:`GainKalmanFilter` on a fresh plant.
 
@@ -221,6 +223,11 @@ def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.2,
     name : str
     backoff : float
         The MPC's band is the comfort band narrowed by this much on both sides [K].
+    warmup_hours : float
+        The filter first replays this much of the BAS log before the control period [h]
+        (:meth:`GainKalmanFilter.run`): the controller takes over a running building with
+        its wall states and gains already estimated. 0: start from the first reading
+        (edges at the mean of their ends, gains 0).
     """
     plant = scn.plant()
     net = model.network
@@ -233,7 +240,13 @@ def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.2,
     # the filter runs at the MPC step: inputs averaged over it (the supply is held anyway)
     kf = GainKalmanFilter(model, mpc.dt, measured)
     meas = plant.measure()
-    kf.reset(meas.T, meas.T_boundary)
+    if warmup_hours > 0:
+        data = scn.tb.data
+        kf.run(data.loc[(data.index >= scn.start - pd.Timedelta(hours=warmup_hours))
+                        & (data.index < scn.start)])   # ends predicted to the start
+        kf.update(meas.T)
+    else:
+        kf.reset(meas.T, meas.T_boundary)
     sl = net.input_slices()
     sup = scn.hvac.supplied
     T, ms_rec, Ts_rec, times, cpu, fails = [plant.T_zones], [], [], [], [], 0
@@ -277,8 +290,8 @@ def run_example(kind: str, argv=None):
         parser.add_argument("--transcription", choices=["implicit", "explicit"], default="implicit",
                             help="how the shooting gaps are written (same optimum)")
     else:
-        parser.add_argument("--qp-solver", choices=["qpoases", "osqp", "piqp", "highs"],
-                            default="qpoases",
+        parser.add_argument("--qp-solver", choices=["piqp", "osqp", "qpoases", "highs"],
+                            default="piqp",
                             help="QP solver plugin of casadi.conic")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
@@ -298,17 +311,23 @@ def run_example(kind: str, argv=None):
     for mk in kinds:
         full = controller_model(scn.tb, mk, end=scn.start)
         model = reduced_model(scn.tb, full, args.order) if args.order else full
-        mpc = _make_controller(kind, model, scn, args, N)
+        mpc = make_controller(kind, model, scn, args.step, N,
+                              **({"transcription": args.transcription} if kind == "economic"
+                                 else {"solver": args.qp_solver}))
         label = f"{'economic NMPC' if kind == 'economic' else 'linear MPC'} ({mk} model)"
         if args.order:
             label = label[:-1] + f", {model.network.n_states} states)"
+        opts = (getattr(full, "meta", None) or {}).get("options", {})
         meta["models"][mk] = {"edges": [(e.a, e.b) for e in full.network.convection_edges],
+                              "identification": {k: opts[k] for k in ("criterion", "selection")
+                                                 if k in opts} or None,
                               "rbar_v": np.asarray(full.rbar_v).tolist(),
                               "c_v": np.asarray(full.c_v).tolist(),
                               "states": model.network.n_states,
                               "build_time_s": getattr(mpc, "build_time", None),
                               "n_variables": getattr(mpc, "n_variables", None)}
-        results.append(run_mpc(scn, mpc, model, label, args.backoff, progress=args.verbose))
+        results.append(run_mpc(scn, mpc, model, label, args.backoff,
+                               warmup_hours=args.warmup, progress=args.verbose))
     table = kpi_table(results, scn.hvac, scn.band, scn.comfort_zones)
     stem = f"{kind}_mpc"
     print(format_table(table))
@@ -322,11 +341,28 @@ def run_example(kind: str, argv=None):
     return table
 
 
-def _make_controller(kind, model, scn, args, N):
+def make_controller(kind: str, model, scn: Scenario, step_minutes: float, N: int, **options):
+    """The example's MPC for ``scn``.
+
+    Parameters
+    ----------
+    kind : {"economic", "linear"}
+    model : ThermalModel or ReducedNetwork
+    scn : Scenario
+    step_minutes : float
+        MPC step [min].
+    N : int
+        Horizon [steps].
+    **options
+        Passed to :class:`~mpc_examples.economic_mpc.EconomicMPC` (e.g. ``transcription``)
+        or :class:`~mpc_examples.linear_mpc.LinearMPC` (e.g. ``solver``).
+    """
     if kind == "economic":
         from .economic_mpc import EconomicMPC
-        return EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
-                           transcription=args.transcription)
-    from .linear_mpc import LinearMPC
-    return LinearMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
-                     solver=args.qp_solver)
+        cls = EconomicMPC
+    elif kind == "linear":
+        from .linear_mpc import LinearMPC
+        cls = LinearMPC
+    else:
+        raise ValueError(f"kind must be 'economic' or 'linear', found {kind!r}")
+    return cls(model, scn.hvac, scn.comfort_zones, dt=step_minutes * 60.0, horizon=N, **options)

@@ -7,6 +7,7 @@ testbed in fast mode, as subprocesses, so the command lines never rot.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -20,7 +21,7 @@ from conftest import REPO
 from mpc_examples.common import ComfortBand, Forecast, HVACModel, kpis, ClosedLoopResult
 from mpc_examples.economic_mpc import EconomicMPC
 from mpc_examples.linear_mpc import LinearMPC
-from mpc_examples.model import GainKalmanFilter
+from mpc_examples.model import GainKalmanFilter, logged_steps
 
 CP = 1006.0 + 1860.0 * 0.0074
 DT = 900.0
@@ -158,16 +159,32 @@ def test_economic_warm_start_is_cheaper(small_model, hvac, comfort_zones):
     assert warm.success and warm.iterations < cold.iterations
 
 
-@pytest.mark.parametrize("bad, match", [
-    (dict(transcription="collocation"), "transcription"),
-    (dict(horizon=0), "horizon"),
-    (dict(comfort_zones=["nowhere"]), "comfort zones"),
-], ids=["transcription", "horizon", "zone"])
-def test_economic_bad_arguments(small_model, hvac, comfort_zones, bad, match):
+@pytest.mark.parametrize("cls, bad, match", [
+    (EconomicMPC, dict(transcription="collocation"), "transcription"),
+    (EconomicMPC, dict(substeps=0), "substeps"),
+    (EconomicMPC, dict(horizon=0), "horizon"),
+    (EconomicMPC, dict(comfort_zones=["nowhere"]), "comfort zones"),
+    (LinearMPC, dict(iterations=0), "iterations"),
+    (LinearMPC, dict(horizon=2.5), "horizon"),
+    (LinearMPC, dict(dt=0.0), "dt"),
+    (LinearMPC, dict(comfort_zones=["nowhere"]), "comfort zones"),
+], ids=["transcription", "substeps", "horizon", "zone", "iterations", "lin-horizon", "dt",
+        "lin-zone"])
+def test_bad_arguments(small_model, hvac, comfort_zones, cls, bad, match):
     kw = dict(comfort_zones=comfort_zones, dt=DT, horizon=4)
     kw.update(bad)
     with pytest.raises(ValueError, match=match):
-        EconomicMPC(small_model, hvac, **kw)
+        cls(small_model, hvac, **kw)
+
+
+@pytest.mark.parametrize("cls", [EconomicMPC, LinearMPC], ids=["economic", "linear"])
+def test_short_forecast_and_hvac_mismatch(small_model, hvac, comfort_zones, cls):
+    mpc = cls(small_model, hvac, comfort_zones, dt=DT, horizon=8)
+    with pytest.raises(ValueError, match="forecast covers 4 steps, the horizon needs 8"):
+        mpc.solve(_x0(small_model), _forecast(small_model, 4))
+    three = HVACModel(cp=CP, ms_min=hvac.ms_min[:3], ms_max=hvac.ms_max[:3])
+    with pytest.raises(ValueError, match="the model has 4 zones"):
+        cls(small_model, three, comfort_zones, dt=DT, horizon=4)
 
 
 # ---- linear MPC ---------------------------------------------------------------------
@@ -249,6 +266,60 @@ def test_kalman_recovers_unknown_gain(small_model):
     np.testing.assert_allclose(kf.x[:3], X[-1, :3], atol=0.1)
 
 
+def _logged_frame(model, u, gains, hours, step=300.0, seed=5):
+    """BAS-like log of the small building: constant inputs and gains, noisy zone sensors."""
+    net = model.network
+    n = int(hours * 3600 / step)
+    u_true = u.copy()
+    u_true[net.input_slices()["Q"]] = gains
+    x0 = model.steady_state(u)
+    X = model.simulate(np.tile(u_true, (n, 1)), step, x0, method="exact")
+    rng = np.random.default_rng(seed)
+    time_ = pd.date_range("2011-02-07", periods=n + 1, freq=f"{int(step)}s",
+                          tz="America/New_York")
+    sl = net.input_slices()
+    cols = {f"T:{z}": X[:, i] + rng.normal(0, 0.05, n + 1) for i, z in enumerate(net.zones)
+            if z in net.measured_zones}
+    cols.update({f"T:{b}": np.full(n + 1, u[sl["T"]][j]) for j, b in enumerate(net.boundary)})
+    for i, z in enumerate(net.zones[:3]):
+        cols[f"ms:{z}"] = np.full(n + 1, u[sl["ms"]][i])
+        cols[f"Ts:{z}"] = np.full(n + 1, u[sl["Ts"]][i])
+    return pd.DataFrame(cols, index=time_), X
+
+
+def test_logged_steps_by_hand(small_model):
+    """Inputs are averaged over each step [t, t + dt); temperatures are read at t."""
+    net = small_model.network
+    t = pd.date_range("2011-02-07", periods=6, freq="5min")
+    df = pd.DataFrame({"T:r1": [20.0, 21, 22, 23, 24, 25], "T:r2": 21.0, "T:r3": 22.0,
+                       "T:outside": [0.0, 3, 6, 9, 12, 15], "T:ground": 10.0,
+                       "ms:r1": [0.0, 0.03, 0.06, 0.0, 0.0, 0.09], "Ts:r1": 30.0}, index=t)
+    times, U, Y = logged_steps(net, df, 900.0, ["r1", "r2", "r3"])
+    sl = net.input_slices()
+    assert list(times) == [t[0], t[3]]
+    np.testing.assert_allclose(U[:, sl["ms"].start], [0.03, 0.03])        # (0 + .03 + .06)/3
+    np.testing.assert_allclose(U[:, sl["T"].start], [3.0, 12.0])          # outside
+    np.testing.assert_allclose(U[:, sl["ms"].start + 1], 0.0)              # r2: no supply
+    np.testing.assert_allclose(Y[:, 0], [20.0, 23.0])
+
+
+def test_kalman_replay_recovers_gains_and_state(small_model):
+    """Replaying 48 h of logged data leaves the filter at the true gains and state at the
+    end of the data (what the closed loop starts from)."""
+    net = small_model.network
+    u = net.input_vector(ms={"r1": 0.05, "r2": 0.05, "r3": 0.05}, Ts=18.0,
+                         T={"outside": 5.0, "ground": 12.0}, Q=0.0)
+    gains = np.array([300.0, 0.0, 150.0, 0.0])
+    df, X = _logged_frame(small_model, u, gains, hours=48.0)
+    kf = GainKalmanFilter(small_model, 900.0, ["r1", "r2", "r3"], sd_gain=50.0, sd_meas=0.05)
+    G = kf.run(df.iloc[:-1])                  # the log ends 5 min before the last sample
+    assert len(G) == 192 and G.iloc[-1].isna().all() and G.iloc[-2].notna().all()
+    # about 7 W (1 sd) of wander at this noise level (test_kalman_recovers_unknown_gain)
+    np.testing.assert_allclose(kf.gains, gains[:3], atol=15.0)
+    # the state at the end of the last step (predicted there, not yet corrected)
+    np.testing.assert_allclose(kf.x[:3], X[-1, :3], atol=0.1)
+
+
 # ---- the examples, end to end, fast mode -------------------------------------------
 def _run_example(module, tmp_path, *extra):
     env = dict(os.environ, OMP_NUM_THREADS="1", MPLBACKEND="Agg")
@@ -259,14 +330,19 @@ def _run_example(module, tmp_path, *extra):
     return out.stdout
 
 
-@pytest.mark.xfail(strict=False, reason="work in progress at the end of session 1: the fast-mode "
-                   "end-to-end run does not pass yet; see issue 8")
 @pytest.mark.parametrize("module, stem, extra", [
     ("mpc_examples.economic_mpc", "economic_mpc", ("--no-figure", "--no-band-baseline")),
     ("mpc_examples.linear_mpc", "linear_mpc", ()),
 ], ids=["economic", "linear"])
 def test_example_fast_mode(tmp_path, module, stem, extra):
-    """Identify on 10 days of testbed data, control Monday 05:00-08:00 (warm-up, occupancy)."""
+    """Identify on the 10 days before, control Monday 05:00-08:00 (warm-up, occupancy).
+
+    Measured (seed 0): baseline 14.2 kWh and 0.013 K·h, band baseline 13.8 kWh; both MPCs
+    12.4 kWh and 0.00 K·h: they start the warm-up at 06:00 with the minimum flow at full
+    reheat and add flow at 06:30 just as needed, where the baseline overshoots its set
+    points. The bounds below leave room for a different identified model, not for a
+    controller that stops planning the warm-up.
+    """
     stdout = _run_example(module, tmp_path, *extra)
     table = pd.read_csv(tmp_path / f"{stem}.csv", index_col=0)
     assert "baseline (testbed BAS)" in table.index
@@ -274,9 +350,17 @@ def test_example_fast_mode(tmp_path, module, stem, extra):
     assert len(mpc) == 1 and mpc[0] in stdout
     row, base = table.loc[mpc[0]], table.loc["baseline (testbed BAS)"]
     assert row["failures"] == 0
-    assert 0 < row["site energy [kWh]"] < 2 * base["site energy [kWh]"]
-    # the warm-up hour is the hard part; the MPC plans it, the baseline reacts
-    assert row["discomfort [K·h]"] <= base["discomfort [K·h]"] + 0.1
+    e, e_base = row["site energy [kWh]"], base["site energy [kWh]"]
+    assert 0.5 * e_base < e < 0.95 * e_base
+    # comfort from 07:00: the MPC plans the warm-up, the baseline reacts (0.013 K·h, 0.18 K)
+    assert row["discomfort [K·h]"] < 0.05
+    assert row["max violation [K]"] < 0.15
+    assert row["CPU median [s]"] < 1.0   # CPU, not wall: the test machine may be loaded
+    if "--no-band-baseline" not in extra:
+        band = table.loc["baseline (band set points)"]
+        assert row["site energy [kWh]"] < band["site energy [kWh]"]
     assert (tmp_path / f"{stem}.txt").read_text().startswith("controller")
+    meta = json.loads((tmp_path / f"{stem}.json").read_text())
+    assert len(meta["models"]["identified"]["edges"]) >= 1
     if "--no-figure" not in extra:
         assert (tmp_path / f"{stem}.png").stat().st_size > 10_000
