@@ -242,7 +242,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
 
 def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
     """SIN candidates → backward elimination by BIC → grey-box fit with intervals."""
-    from .greybox.selection import Candidate, candidate_pairs, select_edges
+    from .greybox.selection import candidate_pairs, select_edges
     from .structure.selection import select_edges as rule_edges
 
     spec = meas.spec
