@@ -20,7 +20,14 @@ from .errors import ModelError
 from .model import ThermalModel, zoh
 
 __all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "relative_error",
-           "minimum_flows", "kstep_validation", "ValidationReport", "validate"]
+           "minimum_flows", "kstep_validation", "ValidationReport", "validate", "Verdict",
+           "verdict", "relative_words", "support_note"]
+
+VERDICT_MARGIN = 0.05
+"""Relative RMSE difference below which a measure favours neither model [-]."""
+
+MPC_HORIZONS_H = (1.0, 6.0)
+"""k-step horizons an MPC works at [h]: the identified model must win at all of them."""
 
 
 @dataclass
@@ -247,6 +254,205 @@ class ValidationReport:
     to_data_units: object = None
     window_step_s: float = 300.0
     kstep: dict = field(default_factory=dict)
+
+    @property
+    def verdict(self) -> "Verdict":
+        """Which model the evidence favours, horizon by horizon (:func:`verdict`)."""
+        ol = self.open_loop
+        ol_gain = (1.0 - ol["identified"].rmse_mean / ol["conduction-only"].rmse_mean
+                   if "identified" in ol and "conduction-only" in ol else None)
+        ks = {}
+        if "identified" in self.kstep and "conduction-only" in self.kstep:
+            a, b = self.kstep["identified"], self.kstep["conduction-only"]
+            ks = {float(h) / 3600.0: float(1.0 - x / y)
+                  for h, x, y in zip(a.horizons, a.rmse_mean, b.rmse_mean)}
+        return verdict(ol_gain, ks, open_loop_hours=self._hours())
+
+    def _hours(self) -> float:
+        try:
+            import pandas as pd
+            return (pd.Timestamp(self.window[1]) - pd.Timestamp(self.window[0])).total_seconds() \
+                / 3600.0 + self.window_step_s / 3600.0
+        except (ValueError, TypeError):
+            return 48.0
+
+
+# ---------------------------------------------------------------------------- verdict
+def relative_words(gain: float) -> str:
+    """A relative RMSE improvement in words: ``"12 % better"``, ``"8 % worse"``.
+
+    Parameters
+    ----------
+    gain : float
+        ``1 − RMSE_identified / RMSE_conduction-only`` [-]: positive when the identified
+        model predicts better.
+
+    Examples
+    --------
+    >>> relative_words(-0.08), relative_words(0.12)
+    ('8 % worse', '12 % better')
+    """
+    if gain != gain:  # NaN
+        return "not comparable"
+    pct = abs(100.0 * gain)
+    if pct < 0.5:
+        return "as good"
+    return f"{pct:.0f} % {'better' if gain > 0 else 'worse'}"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Which model the validation measures favour, and which model to use.
+
+    Attributes
+    ----------
+    gains : dict of str to float
+        Measure (``"48-h open loop"``, ``"1 h"``, ``"6 h"``, ``"24 h"``) → relative RMSE
+        improvement of the identified model over conduction-only [-] (negative: worse).
+    favours : dict of str to str
+        Measure → ``"identified"``, ``"conduction-only"`` or ``"neither"`` (within
+        ``margin``).
+    recommendation : str
+        ``"identified"`` (it wins at every MPC horizon by ``margin``), ``"conduction-only"``
+        (it wins at none) or ``"mixed"`` (it wins at some MPC horizons only; the simpler
+        conduction-only model is the safer choice).
+    basis : str
+        ``"kstep"`` (decided at the MPC horizons) or ``"open-loop"`` (no k-step errors:
+        decided on the open loop alone).
+    margin : float
+        [-]
+    text : str
+        The verdict in two or three sentences.
+    """
+
+    gains: dict
+    favours: dict
+    recommendation: str
+    basis: str
+    margin: float
+    text: str
+
+    def to_dict(self) -> dict:
+        return {"gains": dict(self.gains), "favours": dict(self.favours),
+                "recommendation": self.recommendation, "basis": self.basis,
+                "margin": self.margin, "text": self.text}
+
+
+def verdict(open_loop_gain: float | None, kstep_gains: dict | None = None, *,
+            margin: float = VERDICT_MARGIN, mpc_horizons_h=MPC_HORIZONS_H,
+            open_loop_hours: float = 48.0) -> Verdict:
+    """Weigh every validation measure; recommend a model only where an MPC works.
+
+    A pure function of the numbers, so the rule can be tested on them. Each measure
+    favours the identified model when it is more than ``margin`` better (relative RMSE),
+    conduction-only when it is more than ``margin`` worse, else neither. The identified
+    model is recommended only when it wins at *every* horizon in ``mpc_horizons_h`` (an
+    MPC's predictions live at 1-6 h; a win at 24 h alone says little about control, and
+    its extra air paths cost parameters and can move heat the wrong way). When it wins
+    at some MPC horizons but not all the verdict is ``"mixed"``; when it wins at none, the
+    simpler conduction-only model is recommended. Without k-step errors (``--no-kstep``)
+    the open loop decides, and the text says so.
+
+    Parameters
+    ----------
+    open_loop_gain : float or None
+        ``1 − RMSE_identified / RMSE_conduction-only`` over the open-loop window [-].
+    kstep_gains : dict of float to float, optional
+        Horizon [h] → the same ratio for k-step-ahead prediction from filtered states [-].
+    margin : float
+        Smallest relative difference that counts [-] (default 0.05).
+    mpc_horizons_h : sequence of float
+        Horizons the identified model must win at [h] (default 1 and 6).
+    open_loop_hours : float
+        Length of the open-loop window, for the label [h].
+
+    Returns
+    -------
+    Verdict
+
+    Examples
+    --------
+    Twin house N2 (8 air paths kept): worse in the open loop and at 1 and 6 h, better at 24 h.
+
+    >>> v = verdict(-0.10, {1.0: -0.13, 6.0: -0.09, 24.0: 0.11})
+    >>> v.recommendation
+    'conduction-only'
+    >>> v.favours["24 h ahead"]
+    'identified'
+    """
+    def side(g):
+        if g is None or g != g:
+            return "neither"
+        return "identified" if g > margin else "conduction-only" if g < -margin else "neither"
+
+    gains, favours = {}, {}
+    ol_label = f"{open_loop_hours:g}-h open loop"
+    if open_loop_gain is not None:
+        gains[ol_label] = float(open_loop_gain)
+    for h, g in sorted((kstep_gains or {}).items()):
+        gains[f"{float(h):g} h ahead"] = float(g)
+    favours = {k: side(g) for k, g in gains.items()}
+
+    mpc = [f"{float(h):g} h ahead" for h in mpc_horizons_h if f"{float(h):g} h ahead" in gains]
+    if mpc:
+        basis = "kstep"
+        wins = [k for k in mpc if favours[k] == "identified"]
+        rec = ("identified" if len(wins) == len(mpc)
+               else "mixed" if wins else "conduction-only")
+    else:
+        basis = "open-loop"
+        rec = "identified" if favours.get(ol_label) == "identified" else "conduction-only"
+
+    def listing(who):
+        ks = [k for k, f in favours.items() if f == who]
+        return ", ".join(f"{k} ({abs(100 * gains[k]):.0f} %)" for k in ks)
+
+    parts = []
+    if not gains:
+        return Verdict({}, {}, "conduction-only", "open-loop", margin,
+                       "No measure compared the models; keep the simpler conduction-only model.")
+    per = "; ".join(f"{k} {relative_words(g)}" for k, g in gains.items())
+    parts.append(f"Identified vs conduction-only (relative RMSE): {per}.")
+    who = []
+    if listing("identified"):
+        who.append(f"the identified model wins: {listing('identified')}")
+    if listing("conduction-only"):
+        who.append(f"conduction-only wins: {listing('conduction-only')}")
+    if listing("neither"):
+        who.append(f"within ±{100 * margin:.0f} % (neither): "
+                   + ", ".join(k for k, f in favours.items() if f == "neither"))
+    parts.append(who[0][0].upper() + "; ".join(who)[1:] + ".")
+    span = "-".join(f"{float(h):g}" for h in (min(mpc_horizons_h), max(mpc_horizons_h)))
+    if rec == "identified" and basis == "open-loop":
+        parts.append(f"Use the identified model: it wins the open loop (the horizons an MPC uses, "
+                     f"{span} h, were not checked: run validate with --kstep).")
+    elif rec == "identified":
+        parts.append(f"Use the identified model: it wins at the horizons an MPC uses ({span} h).")
+    elif rec == "mixed":
+        parts.append(f"Mixed evidence at the horizons an MPC uses ({span} h): the identified "
+                     "model does not win at all of them; prefer the conduction-only model "
+                     "unless other knowledge (open doors, a testbed truth) supports the air paths.")
+    else:
+        parts.append("Prefer the conduction-only model: the identified air paths do not improve "
+                     f"prediction at the horizons an MPC uses ({span} h)"
+                     + (" (judged on the open loop alone)" if basis == "open-loop" else "") + ".")
+    return Verdict(gains, favours, rec, basis, margin, " ".join(parts))
+
+
+def support_note(vr: "ValidationReport") -> str:
+    """The verdict of a validation, then what the step responses can add, in words."""
+    out = [vr.verdict.text]
+    if vr.step_errors:
+        e = vr.step_errors
+        i6 = list(vr.horizons_h).index(6.0) if 6.0 in vr.horizons_h else min(1, len(vr.horizons_h) - 1)
+        out.append(f"Step responses vs the truth at {vr.horizons_h[i6]:g} h: identified "
+                   f"{100 * e['identified'][i6]:.0f} % off, conduction-only "
+                   f"{100 * e['conduction-only'][i6]:.0f} % off — what a controller acts "
+                   "through; only testbed data have a truth to compare with.")
+    else:
+        out.append("Step responses: no truth to compare with on measured data; the figure shows "
+                   "how far the identified couplings move heat between zones.")
+    return " ".join(out)
 
 
 def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: ThermalModel | None = None,
