@@ -14,6 +14,7 @@ from rich.table import Table
 from ..data import read_measurements
 from ..errors import DataError, ModelError
 from ..io import load_model
+from ..outputs import support_note as _support_note
 from ..spec import load_spec
 from . import app
 from ._common import console, handle_errors, progress
@@ -91,7 +92,8 @@ def identify(
       thermctl identify data.csv -b building.yaml --criterion simulation   # the paper's method
       thermctl identify data.csv -b building.yaml --candidates all --no-solar
     """
-    from ..identify import IdentifyOptions, identify as run_identify, write_outputs
+    from ..identify import IdentifyOptions, identify as run_identify
+    from ..outputs import write_outputs
 
     t0 = time.perf_counter()
     spec = load_spec(building)
@@ -180,7 +182,7 @@ def validate(
       thermctl validate out/model.json data.csv --hours 24 --no-kstep
     """
     from ..validate import validate as run_validate
-    from ..identify import staged_output
+    from ..outputs import staged_output, validation_document
     from .. import report as rep
 
     model = load_model(model_path)
@@ -212,81 +214,6 @@ def validate(
 def _saved_window(model, key):
     w = model.meta.get("data", {}).get(key)
     return None if w is None else (w[0], None)
-
-
-def validation_document(vr) -> dict:
-    conv = lambda v: float(vr.to_data_units(v))  # noqa: E731
-    rows = []
-    for z in vr.open_loop["identified"].zones:
-        row = {"zone": z}
-        for name, r in vr.open_loop.items():
-            row[f"RMSE {name}"] = conv(r.rmse[z])
-            row[f"max {name}"] = conv(r.max_abs[z])
-        rows.append(row)
-    sr_rows = []
-    for name, err in vr.step_errors.items():
-        sr_rows.append({"model": name, **{f"{h:g} h": float(e) for h, e in zip(vr.horizons_h, err)}})
-    blocks = [
-        {"section": "Validation", "kind": "text", "title": "Open-loop prediction",
-         "content": f"Simulated from {vr.window[0]} to {vr.window[1]} with measured inputs, "
-                    f"from the paper's initial state; errors in {vr.units} (differences)."},
-        {"section": "Validation", "kind": "table", "title": "Per-zone error", "content": rows},
-    ]
-    ks_rows = []
-    for name, r in vr.kstep.items():
-        ks_rows.append({"model": name, **{f"{h / 3600:g} h": conv(v)
-                                          for h, v in zip(r.horizons, r.rmse_mean)}})
-    if ks_rows:
-        blocks.append({"section": "Validation", "kind": "table",
-                       "title": f"k-step-ahead RMSE from Kalman-filtered states ({vr.units}, all zones)",
-                       "content": ks_rows})
-    if sr_rows:
-        blocks.append({"section": "Validation", "kind": "table",
-                       "title": "Step-response error vs the truth (relative Frobenius norm)",
-                       "content": sr_rows})
-    blocks.append({"section": "Validation", "kind": "note", "title": "What the data can support",
-                   "content": _support_note(vr)})
-    return {"format": "thermctl-validation", "version": 1, "window": list(vr.window),
-            "units": vr.units, "open_loop": rows,
-            "rmse_mean": {k: conv(r.rmse_mean) for k, r in vr.open_loop.items()},
-            "step_response_error": {k: v.tolist() for k, v in vr.step_errors.items()},
-            "step_responses_K_per_100W": {k: v.tolist() for k, v in vr.step_responses.items()},
-            "horizons_h": list(vr.horizons_h), "zones": vr.zones,
-            "kstep_rmse": {k: {"horizons_s": r.horizons.tolist(), "zones": r.zones,
-                               "rmse": np.vectorize(conv)(r.rmse).tolist(),
-                               "rmse_mean": [conv(v) for v in r.rmse_mean],
-                               "n": r.n.tolist()} for k, r in vr.kstep.items()},
-            "report": blocks}
-
-
-def _support_note(vr) -> str:
-    """Which of the three measures separates the models on these data, in words."""
-    out = []
-    ol = {k: r.rmse_mean for k, r in vr.open_loop.items()}
-    if "identified" in ol and "conduction-only" in ol:
-        gain = 1.0 - ol["identified"] / ol["conduction-only"]
-        out.append(f"48-h open loop: the identified model is {100 * gain:+.0f} % better than "
-                   "conduction-only" + (" — within what unmeasured gains and the unknown initial "
-                                        "wall states move, so this measure cannot tell the "
-                                        "models apart here" if abs(gain) < 0.05 else "") + ".")
-    if "identified" in vr.kstep and "conduction-only" in vr.kstep:
-        a, b = vr.kstep["identified"].rmse_mean, vr.kstep["conduction-only"].rmse_mean
-        rel = 1.0 - a / b
-        parts = ", ".join(f"{h / 3600:g} h {100 * r:+.0f} %" for h, r in zip(vr.kstep["identified"].horizons, rel))
-        out.append(f"k-step ahead from filtered states (identified vs conduction-only): {parts}"
-                   + (" — the data support the air paths at the horizons an MPC uses."
-                      if np.nanmax(rel) > 0.05 else
-                      " — no clear difference: on these data the air paths matter little "
-                      "for prediction, or the gains hide them."))
-    if vr.step_errors:
-        e = vr.step_errors
-        out.append(f"step responses vs the truth at 6 h: identified {100 * e['identified'][1]:.0f} %, "
-                   f"conduction-only {100 * e['conduction-only'][1]:.0f} % — what a controller acts "
-                   "through; only testbed data have a truth to compare with.")
-    else:
-        out.append("step responses: no truth to compare with on measured data; the figure shows "
-                   "how far the identified couplings move heat between zones.")
-    return " ".join(out)
 
 
 def _print_validation(vr):
