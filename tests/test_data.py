@@ -202,7 +202,11 @@ def test_duplicates_and_disorder(small_spec):
     dup_diff = df.iloc[[20, 21]].copy()
     dup_diff["T:r1"] += 1.0                               # conflicting values
     mixed = pd.concat([df, dup_same, dup_diff]).sample(frac=1.0, random_state=3)
-    meas = read_quiet(mixed, small_spec)
+    # conflicting repeated stamps are an error by default (issue 22); averaged on request
+    with pytest.raises(DataError, match="2 time stamp.*appear more than once with different"):
+        read_quiet(mixed, small_spec)
+    with pytest.warns(DataWarning, match="averaged"):
+        meas = read_measurements(mixed, small_spec, average_conflicts=True)
     q = meas.quality
     assert q.rows_read == 105 and q.n_samples == 100
     assert q.duplicates_removed == 5 and q.duplicate_conflicts == 2
@@ -324,9 +328,12 @@ def test_fahrenheit_read_as_si_warns(small_spec):
     df = linear_frame(n=10)
     for col in ("T:r1", "T:r2", "T:r3"):
         df[col] = 72.0
-    with pytest.warns(DataWarning, match="looks like °F"):
-        meas = read_measurements(df, small_spec)
-    assert any("looks like °F" in n for n in meas.quality.notes)
+    # an error naming the columns since issue 22; allow_odd_units reads as given, warning
+    with pytest.raises(DataError, match=r"T:r1 \(median 72.0 °C\).*like °F.*--units imperial"):
+        read_measurements(df, small_spec)
+    with pytest.warns(DataWarning, match="like °F"):
+        meas = read_measurements(df, small_spec, allow_odd_units=True)
+    assert any("like °F" in n for n in meas.quality.notes)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -527,7 +534,7 @@ BAD = [
     ("empty file", _csv(""), {}, r"data\.csv: data file is empty"),
     ("header only", _csv("time,T:r1\n"), {}, "header but no data rows"),
     ("no time column", _edit(lambda df: df.drop(columns=["time"])), {}, r"no 'time' column"),
-    ("semicolons", _csv("time;T:r1\n2011-01-01T00:00;20\n"), {}, r"';'- or tab-separated"),
+    ("semicolons", _csv("time;T:r1\n2011-01-01T00:00;20\n"), {}, r"looks ';'-separated; pass sep=';'"),
     ("unparsable time", _edit(_set("time", 2, "yesterday")), {},
      r"column 'time': cannot parse 'yesterday' at line 4"),
     ("empty time", _edit(_set("time", 5, None)), {}, r"column 'time' is empty at line 7"),

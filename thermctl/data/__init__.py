@@ -6,7 +6,8 @@ time stamp:
 =================  ==========================  =============================================
 column             SI (``units="si"``)         imperial (``units="imperial"``)
 =================  ==========================  =============================================
-``time``           ISO 8601, UTC offset optional (``2011-01-21T00:05:00-05:00``)
+``time``           ISO 8601, UTC offset optional (``2011-01-21T00:05:00-05:00``); other
+                   forms with ``time_format`` (``excel``, ``unix``, ``%d.%m.%Y %H:%M``)
 ``T:<node>``       °C                          °F
 ``Ts:<zone>``      °C                          °F
 ``ms:<zone>``      kg/s                        CFM (read as volume flow, like ``vs:``)
@@ -39,8 +40,19 @@ Choices this package makes (``docs/data-format.md`` repeats them for users):
   it is plain resampling of irregular stamps, up to ``gap_limit`` a short gap
   (interpolated and counted), longer a long gap (left NaN, reported, excluded).
   Down-sampling takes the value at each grid instant; it does not average.
-* Duplicated time stamps are merged (rows with conflicting values are averaged and
-  counted); rows out of order are sorted; negative flows are set to 0 and counted.
+* Duplicated time stamps with identical rows are merged and counted; repeated stamps whose
+  rows disagree (a clock set back) are an error naming the time range, unless
+  ``average_conflicts=True`` (then averaged, with a warning). Rows out of order are
+  sorted; negative flows are set to 0 and counted.
+* A zone (``T:``) or supply (``Ts:``) temperature column whose median does not fit the
+  units (above 40 °C / 50 °C for ``si``, below 41 °F / 32 °F for ``imperial``) is an error
+  naming the column, unless ``allow_odd_units=True`` (then a warning). Checked per column:
+  one column exported in °F among °C columns is caught.
+* CSV files are comma-separated unless ``sep`` says otherwise (``sep=";"`` also reads
+  decimal commas). A YAML/JSON file given as data is refused as a likely swap of data
+  and spec.
+* :meth:`Measurements.split` warns when fewer than :data:`MIN_CALIBRATION_DAYS` (3)
+  days calibrate.
 
 Nothing here writes a file.
 
@@ -50,11 +62,11 @@ Layout: :mod:`._read` (file, columns, time stamps, units; :func:`read_measuremen
 """
 
 from .days import DayArray, day_array
-from .measurements import (PAPER_CALIBRATION, PAPER_VALIDATION_START, Gap, Measurements,
-                           QualityReport)
+from .measurements import (MIN_CALIBRATION_DAYS, PAPER_CALIBRATION, PAPER_VALIDATION_START, Gap,
+                           Measurements, QualityReport)
 from ._read import CFM, read_measurements
 
 __all__ = [
     "read_measurements", "Measurements", "QualityReport", "Gap", "DayArray", "day_array",
-    "CFM", "PAPER_CALIBRATION", "PAPER_VALIDATION_START",
+    "CFM", "PAPER_CALIBRATION", "PAPER_VALIDATION_START", "MIN_CALIBRATION_DAYS",
 ]

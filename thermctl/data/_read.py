@@ -38,7 +38,10 @@ _HAS_OFFSET_RE = re.compile(r"(?:Z|[+-]\d{2}:?\d{2})$")
 
 
 def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
-                      gap_limit="30min", tz=None, name: str | None = None) -> Measurements:
+                      gap_limit="30min", tz=None, name: str | None = None, *,
+                      sep: str = ",", time_format: str | None = None,
+                      allow_odd_units: bool = False,
+                      average_conflicts: bool = False) -> Measurements:
     """Read measured data (CSV, parquet or a DataFrame) onto a regular SI grid.
 
     Parameters
@@ -63,6 +66,22 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
         stamps without a UTC offset. Default: the data's own offset (UTC for naive stamps).
     name : str, optional
         Name used in messages for a DataFrame source.
+    sep : str, default ","
+        CSV field separator (``";"`` for many European spreadsheet exports; with ``";"`` a
+        decimal comma is read too).
+    time_format : str, optional
+        How the ``time`` column is written. Default ISO 8601. ``"excel"``: spreadsheet
+        serial days (``40564.25`` is 2011-01-21 06:00, local time); ``"unix"``: seconds since
+        1970-01-01 UTC; anything with a ``%`` is a :func:`~datetime.datetime.strptime`
+        format such as ``"%d.%m.%Y %H:%M"``.
+    allow_odd_units : bool, default False
+        A zone temperature column whose level does not fit ``units`` (e.g. a median of
+        72 read as °C) is an error naming the column; with this flag it is read as given,
+        with a :class:`~thermctl.errors.DataWarning`.
+    average_conflicts : bool, default False
+        Repeated time stamps whose rows disagree (a clock set back, a daylight-saving
+        hour exported without offsets) are an error naming the time range; with this
+        flag they are averaged, with a :class:`~thermctl.errors.DataWarning`.
 
     Returns
     -------
@@ -71,7 +90,8 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
     Raises
     ------
     DataError
-        One line naming the file and the column, zone or line at fault.
+        One line naming the file and the column, zone or line at fault, and the option
+        that overrides the check where there is one.
 
     Examples
     --------
@@ -82,9 +102,9 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
     """
     if units not in ("si", "imperial"):
         raise DataError(f"units must be 'si' or 'imperial', found {units!r}")
-    df, src, row_label = _load_table(source, name)
+    df, src, row_label = _load_table(source, name, sep)
     cols = _classify(df.columns, spec, src)
-    t_ns, tzinfo, notes = _parse_time(df["time"], src, tz, row_label)
+    t_ns, tzinfo, notes = _parse_time(df["time"], src, tz, row_label, time_format)
     gap_ns = _timedelta(gap_limit, "gap_limit").value
     if gap_ns < 0:
         raise DataError(f"gap_limit must be >= 0, found {gap_limit!r}")
@@ -115,7 +135,11 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
     if dup.any():
         grp = raw[dup].groupby(level=0)
         n_dups = int(dup.sum() - grp.ngroups)
-        conflicts = int((grp.nunique(dropna=False) > 1).any(axis=1).sum())
+        bad = (grp.nunique(dropna=False) > 1).any(axis=1)
+        conflicts = int(bad.sum())
+        if conflicts:
+            _conflicting_stamps(bad[bad].index.to_numpy(), t_ns, tzinfo, src, row_label,
+                                average_conflicts)
         raw = raw.groupby(level=0, sort=True).mean()
         logger.info("%s: %d duplicate rows removed (%d conflicting)", src, n_dups, conflicts)
     t = raw.index.to_numpy(dtype=np.int64)
@@ -135,7 +159,7 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
         gaps += [Gap(scol, index[a], index[b - 1], b - a) for a, b in _runs(code == _EXCLUDED)]
     frame = pd.DataFrame(frame, index=index)
 
-    notes += _sanity(frame, spec, units)
+    notes += _sanity(frame, spec, units, src, allow_odd_units)
     quality = QualityReport(
         source=src, units=units, rows_read=len(df), columns_used=dict(cols["used"]),
         ignored_columns=cols["ignored"], unmeasured_zone_columns=cols["unmeasured"],
@@ -157,7 +181,7 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
 
 
 # ---------------------------------------------------------------------------- internals
-def _load_table(source, name):
+def _load_table(source, name, sep=","):
     """Read the table; returns (DataFrame with a 'time' column, source name, row labeller)."""
     if isinstance(source, pd.DataFrame):
         src = name or "<DataFrame>"
@@ -177,6 +201,10 @@ def _load_table(source, name):
         raise DataError(f"{src}: not a file")
     if path.stat().st_size == 0:
         raise DataError(f"{src}: data file is empty")
+    if path.suffix.lower() not in (".parquet", ".pq"):
+        _not_a_spec(path)
+    if not isinstance(sep, str) or len(sep) != 1:
+        raise DataError(f"sep must be one character such as ',' or ';', found {sep!r}")
     parquet = path.suffix.lower() in (".parquet", ".pq")
     try:
         if parquet:
@@ -187,12 +215,15 @@ def _load_table(source, name):
             dupes = sorted({c for c in df.columns if list(df.columns).count(c) > 1})
         else:
             with open(path, newline="", encoding="utf-8-sig") as fh:
-                header = next(csv.reader(fh), [])
+                header = next(csv.reader(fh, delimiter=sep), [])
             header = [h.strip() for h in header]
             dupes = sorted({h for h in header if header.count(h) > 1})
             if not any(h for h in header):
                 raise DataError(f"{src}: data file is empty (no header line)")
-            df = pd.read_csv(path, encoding="utf-8-sig", skipinitialspace=True)
+            # a ';'-separated export (European spreadsheets) usually has decimal commas;
+            # cells with a decimal point stay strings and _numeric still reads them
+            df = pd.read_csv(path, encoding="utf-8-sig", skipinitialspace=True, sep=sep,
+                             decimal="," if sep == ";" else ".")
             df.columns = [str(c).strip() for c in df.columns]
     except DataError:
         raise
@@ -206,13 +237,35 @@ def _load_table(source, name):
     return df, src, ((lambda i: f"row {i}") if parquet else (lambda i: f"line {i + 2}"))
 
 
+_SPEC_SUFFIXES = (".yaml", ".yml", ".json")
+_YAML_KEY_RE = re.compile(r"^(---|\{|\[|[A-Za-z_][\w-]*:(\s|$))")
+
+
+def _not_a_spec(path: Path) -> None:
+    """A building spec (or any YAML/JSON) passed as data: say so, rather than fail on 'time'."""
+    first = ""
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as fh:
+            for line in fh:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    first = line.strip()
+                    break
+    except OSError:
+        return
+    if path.suffix.lower() in _SPEC_SUFFIXES or _YAML_KEY_RE.match(first):
+        raise DataError(f"{path}: looks like a building spec or other YAML/JSON, not "
+                        "measurements (CSV or parquet); did you swap DATA and --building?")
+
+
 def _check_table(df, src, dupes):
     if dupes:
         raise DataError(f"{src}: column(s) {dupes} appear more than once")
     if "time" not in df.columns:
         hint = ""
         if len(df.columns) == 1 and any(s in str(df.columns[0]) for s in ";\t"):
-            hint = " (the file looks ';'- or tab-separated; expected commas)"
+            which = ";" if ";" in str(df.columns[0]) else "\\t"
+            hint = (f" (the file looks {which!r}-separated; pass sep={which!r}, "
+                    f"on the command line thermctl --sep '{which}' ...)")
         raise DataError(f"{src}: no 'time' column{hint}; found columns "
                         f"{_short_list([str(c) for c in df.columns])}")
     if len(df) == 0:
@@ -284,13 +337,16 @@ def _classify(columns, spec: BuildingSpec, src):
     return {"used": used, "ignored": ignored, "unmeasured": unmeasured, "no_supply": no_supply}
 
 
-def _parse_time(col: pd.Series, src, tz, row_label):
+def _parse_time(col: pd.Series, src, tz, row_label, time_format=None):
     """Time stamps → (int64 ns UTC array, tzinfo of the result, notes)."""
     notes = []
     target = _tzinfo(tz) if tz is not None else None
     empty = col.isna()
     if empty.any():
         raise DataError(f"{src}: column 'time' is empty at {row_label(int(np.argmax(empty)))}")
+    fmt = None if time_format is None else str(time_format).strip()
+    if fmt and fmt.lower() not in ("iso", "iso8601"):
+        col = _parse_time_format(col, fmt, src, row_label)
     if pd.api.types.is_datetime64_any_dtype(col):
         idx = pd.DatetimeIndex(col)
         native = idx.tz
@@ -307,7 +363,7 @@ def _parse_time(col: pd.Series, src, tz, row_label):
             i = int(np.argmax(bad))
             raise DataError(f"{src}: column 'time': cannot parse {s.iloc[i]!r} at {row_label(i)} "
                             f"({int(bad.sum())} unparsable); expected ISO 8601 such as "
-                            "2011-01-21T00:05:00-05:00")
+                            f"2011-01-21T00:05:00-05:00{_format_hint(s.iloc[i])}")
         has_off = s.str.contains(_HAS_OFFSET_RE)
         if has_off.any() and not has_off.all():
             i = int(np.argmax(~has_off.to_numpy() if has_off.iloc[0] else has_off.to_numpy()))
@@ -327,6 +383,63 @@ def _parse_time(col: pd.Series, src, tz, row_label):
             utc = idx.tz_convert("UTC")
     t_ns = utc.as_unit("ns").asi8.copy()
     return t_ns, out_tz, notes
+
+
+_EXCEL_EPOCH = pd.Timestamp("1899-12-30")   # serial day 0 of spreadsheets (1900 date system)
+
+
+def _parse_time_format(col: pd.Series, fmt: str, src, row_label) -> pd.Series:
+    """Stamps written as ``fmt`` ("excel", "unix" or a strptime format) → datetime Series.
+
+    Excel serial days and strptime stamps without ``%z`` are local wall-clock time (naive);
+    unix seconds are UTC instants.
+    """
+    key = fmt.lower()
+    if key in ("excel", "unix"):
+        num = pd.to_numeric(col, errors="coerce")
+        bad = num.isna().to_numpy()
+        if not bad.any():
+            if key == "excel":
+                # serial days carry float round-off of ~1e-6 s; stamps are whole seconds
+                out = (_EXCEL_EPOCH + pd.to_timedelta(num.to_numpy(), unit="D")).round("s")
+            else:
+                out = pd.to_datetime(num.to_numpy(), unit="s", utc=True).round("ms")
+            return pd.Series(out, index=col.index)
+        what = ("spreadsheet serial days such as 40564.25" if key == "excel"
+                else "seconds since 1970-01-01 UTC such as 1295568300")
+    elif "%" in fmt:
+        parsed = pd.to_datetime(col.astype(str).str.strip(), format=fmt, errors="coerce")
+        bad = parsed.isna().to_numpy()
+        if not bad.any():
+            return parsed
+        what = f"time_format {fmt!r}"
+    else:
+        raise DataError(f"time_format must be iso, excel, unix or a strptime format with %, "
+                        f"such as '%d.%m.%Y %H:%M'; found {fmt!r}")
+    i = int(np.argmax(bad))
+    raise DataError(f"{src}: column 'time': cannot parse {col.iloc[i]!r} at {row_label(i)} "
+                    f"({int(bad.sum())} unparsable); expected {what}")
+
+
+def _format_hint(text: str) -> str:
+    """Which --time-format an unparsable ISO stamp probably needs ("" if no guess)."""
+    text = str(text).strip()
+    try:
+        x = float(text)
+    except ValueError:
+        x = None
+    if x is not None:
+        if 20_000 < x < 80_000:         # 1954..2119 as spreadsheet serial days
+            return "; it looks like a spreadsheet serial date: pass time_format='excel' " \
+                   "(thermctl --time-format excel ...)"
+        if 1e8 < x < 4e9:
+            return "; it looks like unix seconds: pass time_format='unix' " \
+                   "(thermctl --time-format unix ...)"
+        return ""
+    if re.fullmatch(r"\d{1,2}[./]\d{1,2}[./]\d{4}.*", text):
+        return ("; for day-first or month-first dates pass a strptime format, e.g. "
+                "thermctl --time-format '%d.%m.%Y %H:%M' ...")
+    return ""
 
 
 def _localize(idx, target, src, notes):
@@ -392,20 +505,75 @@ def _to_si(v, col, units):
     elif prefix == "vs":
         return v * RHO_AIR, f"{col} m³/s → kg/s (ρ = {RHO_AIR} kg/m³)"
     return v, None
-def _sanity(frame, spec, units) -> list[str]:
-    """Warn when zone temperatures look like the other unit system."""
-    cols = [f"T:{z}" for z in spec.measured_zones if f"T:{z}" in frame]
-    if not cols:
+def _conflicting_stamps(stamps, t_file, tzinfo, src, row_label, average: bool) -> None:
+    """Repeated stamps whose rows disagree: an error, or a warning with ``average``.
+
+    A clock set back (or a daylight-saving hour exported without UTC offsets) writes the
+    same stamps twice with different readings; averaging them blends two different hours
+    into one, so the default refuses and says where.
+
+    Parameters
+    ----------
+    stamps : ndarray of int64
+        The conflicting stamps [ns UTC], sorted.
+    t_file : ndarray of int64
+        All stamps in file order [ns UTC] (to find the backward jump).
+    """
+    def local(ns):
+        return pd.Timestamp(int(ns), tz="UTC").tz_convert(tzinfo).strftime("%Y-%m-%d %H:%M")
+
+    n = len(stamps)
+    where = f"{n} time stamp(s) from {local(stamps[0])} to {local(stamps[-1])} appear more " \
+            "than once with different values"
+    back = np.diff(t_file)
+    if (back < 0).any():
+        i = int(np.argmin(back))          # the largest backward jump in file order
+        where += (f" (the clock jumps back from {local(t_file[i])} to {local(t_file[i + 1])} "
+                  f"at {row_label(i + 1)})")
+    if not average:
+        raise DataError(f"{src}: {where}; fix the export's clock, or pass "
+                        "average_conflicts=True (thermctl --average-conflicts ...) to "
+                        "average the conflicting rows")
+    warnings.warn(f"{src}: {where}; averaged (average_conflicts)", DataWarning, stacklevel=3)
+
+
+# Plausible medians of zone temperatures: an indoor zone is not at 40 °C for weeks (72
+# read as °C is a room in °F), nor below 41 °F (5 °C; 20 read as °F is a room in °C).
+# Supply, outdoor and ground columns are left alone: either unit can be plausible there.
+_MAX_MEDIAN_C = 40.0
+_MIN_MEDIAN_F = 41.0
+
+
+def _sanity(frame, spec, units, src="<data>", allow: bool = False) -> list[str]:
+    """Zone temperature columns whose level looks like the other unit system.
+
+    Checked per column, so one °F column among °C columns is caught (a median over all
+    zones would hide it). An error naming the columns, or with ``allow`` a warning.
+    """
+    odd, checked = [], 0
+    for z in spec.measured_zones:
+        col = f"T:{z}"
+        v = frame[col].to_numpy() if col in frame else np.array([])
+        if not np.isfinite(v).any():
+            continue
+        checked += 1
+        med = float(np.nanmedian(v))
+        if units == "si" and med > _MAX_MEDIAN_C:
+            odd.append((col, f"{med:.1f} °C"))
+        elif units == "imperial" and med * 1.8 + 32.0 < _MIN_MEDIAN_F:
+            odd.append((col, f"{med * 1.8 + 32.0:.1f} °F"))
+    if not odd:
         return []
-    med = float(np.nanmedian(frame[cols].to_numpy()))
-    msg = None
-    if units == "si" and med > 45:
-        msg = (f"median zone temperature {med:.1f} °C looks like °F; "
-               "read with units='imperial' (--units imperial)?")
-    elif units == "imperial" and med < 5:
-        msg = (f"median zone temperature {med * 1.8 + 32:.1f} °F looks like °C; "
-               "read with units='si'?")
-    if msg:
-        warnings.warn(msg, DataWarning, stacklevel=3)
-        return [msg]
-    return []
+    cols = ", ".join(f"{c} (median {m})" for c, m in odd)
+    other, opt = ("°F", "units='imperial' (--units imperial)") if units == "si" else \
+        ("°C", "units='si' (--units si)")
+    if len(odd) == checked:     # the whole file is in the other unit
+        msg = f"{cols} look(s) like {other}; read the file with {opt}"
+    else:                       # a column exported in another unit than the rest
+        msg = (f"{cols} look(s) like {other} while the other temperature columns fit "
+               f"{'°C' if units == 'si' else '°F'}; convert that column")
+    if not allow:
+        raise DataError(f"{src}: {msg}; or pass allow_odd_units=True "
+                        "(thermctl --allow-odd-units ...) to read it as given")
+    warnings.warn(f"{src}: {msg} (read as given: allow_odd_units)", DataWarning, stacklevel=3)
+    return [msg]
