@@ -163,11 +163,23 @@ def load_model(path) -> ThermalModel:
     return model_from_dict(data, source=str(Path(path)))
 
 
-def save_statespace(sys, path, op=None) -> None:
+def save_statespace(sys, path, op=None, info=None, kalman=None) -> None:
     """Save a ``control.StateSpace`` as ``.npz``: ``A, B, C, D, dt`` and the signal names.
 
-    The file also holds the operating point (``x_op``, ``u_op``) when given, since the
-    linear model is in deviations from it. Load with :func:`load_statespace`.
+    Parameters
+    ----------
+    sys : control.StateSpace
+    path : str or Path
+    op : OperatingPoint, optional
+        Stored as ``x_op``, ``u_op``: the linear model is in deviations from it.
+    info : dict, optional
+        Plain data stored as JSON in ``info`` (``thermctl export`` puts the operating point
+        with the source of every value, and the disturbance inputs, there).
+    kalman : dict, optional
+        Arrays and name lists of the identified Kalman filter
+        (``thermctl.export.KalmanFilter.arrays``), stored as ``kf_<name>``.
+
+    Load with :func:`load_statespace`.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -176,6 +188,10 @@ def save_statespace(sys, path, op=None) -> None:
                   outputs=np.array(sys.output_labels), name=np.array(sys.name))
     if op is not None:
         arrays.update(x_op=np.asarray(op.x), u_op=np.asarray(op.u))
+    if info is not None:
+        arrays["info"] = np.array(json.dumps(info, default=_plain))
+    for k, v in (kalman or {}).items():
+        arrays[f"kf_{k}"] = np.asarray(v)
     tmp = path.with_name(f".{path.name}.tmp.npz")
     np.savez(tmp, **arrays)
     os.replace(tmp, path)
@@ -187,8 +203,16 @@ def load_statespace(path):
     Returns
     -------
     sys : control.StateSpace
-    op : dict
-        ``x_op``/``u_op`` arrays if the file has them, else empty.
+    extras : dict
+        ``x_op``/``u_op`` arrays, ``info`` (dict: operating point with the source of each
+        value, disturbance inputs) and ``kalman`` (dict of the Kalman filter's arrays:
+        ``A, B, C, Qc, R``, at a sample time also ``Phi, Gamma, Qd, P, K``; name lists
+        ``states, inputs, outputs``) — each only if the file has it.
+
+    Examples
+    --------
+    >>> sys, extras = load_statespace("ss.npz")                      # doctest: +SKIP
+    >>> extras["info"]["operating_point"]["inputs"]["ms"]          # doctest: +SKIP
     """
     import control as ct
 
@@ -198,5 +222,15 @@ def load_statespace(path):
         sys = ct.ss(f["A"], f["B"], f["C"], f["D"], dt=dt if dt > 0 else 0,
                     states=[str(s) for s in f["states"]], inputs=[str(s) for s in f["inputs"]],
                     outputs=[str(s) for s in f["outputs"]], name=str(f["name"]))
-        op = {k: f[k] for k in ("x_op", "u_op") if k in f}
-    return sys, op
+        extras = {k: f[k] for k in ("x_op", "u_op") if k in f}
+        if "info" in f:
+            extras["info"] = json.loads(str(f["info"]))
+        kf = {}
+        for k in f.files:
+            if k.startswith("kf_"):
+                v = f[k]
+                kf[k[3:]] = [str(s) for s in v] if v.dtype.kind == "U" else \
+                    (float(v) if v.ndim == 0 else v)
+        if kf:
+            extras["kalman"] = kf
+    return sys, extras

@@ -20,6 +20,7 @@ The parameter vector of the CasADi functions is per convection edge:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -425,11 +426,46 @@ class ThermalModel:
 
     # ---- exports -----------------------------------------------------------
     def operating_point(self, x=None, **inputs) -> "OperatingPoint":
-        """An operating point from input values (see :meth:`ThermalNetwork.input_vector`).
+        """An operating point from input values (see `ThermalNetwork.input_vector`).
 
-        ``x`` defaults to the steady state for those inputs.
+        Parameters
+        ----------
+        x : array_like, optional
+            State [°C]; default: the steady state for these inputs.
+        ms, Ts, T, Q : float or mapping
+            Supply flow per zone [kg/s], supply temperature per zone [°C], boundary
+            temperatures [°C], heat per zone [W]: one value for every node, or a mapping
+            by node name. In a mapping the key ``"*"`` gives the value of every node not
+            named, e.g. ``T={"*": 21.0, "outside": -5.0}`` (all boundaries at 21 °C but
+            the outside at −5 °C). A mapping for ``T`` must cover every boundary node,
+            by name or through ``"*"``.
+
+        Examples
+        --------
+        >>> op = model.operating_point(ms={"r240": 0.05}, Ts=14.0,
+        ...                            T={"*": 21.0, "outside": -5.0})   # doctest: +SKIP
         """
-        u = self.network.input_vector(**inputs)
+        net = self.network
+        for name in ("ms", "Ts", "T", "Q"):
+            val = inputs.get(name)
+            if not isinstance(val, Mapping):
+                continue
+            nodes = net.boundary if name == "T" else net.zones
+            unknown = sorted(set(val) - set(nodes) - {"*"})
+            if unknown:
+                raise ModelError(f"{name}: unknown node(s) {unknown}; expected one of {list(nodes)} "
+                                 "or '*' for all others")
+            if "*" in val:
+                inputs[name] = {n: val.get(n, val["*"]) for n in nodes}
+            elif name == "T":
+                # a silent default boundary temperature would move the operating point
+                # without anyone noticing, so every boundary node must be given
+                missing = [n for n in nodes if n not in val]
+                if missing:
+                    raise ModelError(f"T: no temperature for boundary node(s) {missing}; give "
+                                     f"them, or one for all others with T={{'*': 21.0, ...}} "
+                                     f"(command line: --op T=21 --op T[{missing[0]}]=...)")
+        u = net.input_vector(**inputs)
         x = self.steady_state(u) if x is None else np.asarray(x, dtype=float)
         return OperatingPoint(x=x, u=u)
 

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from pathlib import Path
 
 import casadi as ca
+import numpy as np
 import typer
+from rich.markup import escape
 
-from ..errors import ModelError
+from ..errors import ModelError, ThermctlError
 from ..io import atomic_write_text, load_model, save_statespace
 from . import app
 from ._common import console, handle_errors
@@ -18,54 +21,111 @@ _OP_RE = re.compile(r"^(ms|Ts|T|Q)(?:\[([^\]]+)\])?=(.+)$")
 
 
 def parse_operating_point(items: list[str]) -> dict:
-    """``["ms=0.05", "T[outside]=5", "Ts=14"]`` → kwargs for ``model.operating_point``."""
+    """``--op`` values → keyword arguments of ``ThermalModel.operating_point``.
+
+    ``NAME=VALUE`` sets every node (stored under the key ``"*"`` when per-node values of
+    the same NAME are given too), ``NAME[node]=VALUE`` one node; a per-node value wins
+    over the value for all nodes, whatever their order: ``["T=21", "T[outside]=-5"]`` →
+    ``{"T": {"*": 21.0, "outside": -5.0}}``.
+    """
     out: dict = {}
     for item in items:
         m = _OP_RE.match(item.strip())
         if not m:
-            raise ModelError(f"--op {item!r}: expected NAME=VALUE or NAME[node]=VALUE with NAME "
-                             "one of ms, Ts, T, Q (e.g. --op ms=0.05 --op 'T[outside]=5')")
+            raise ModelError(f"--op {item}: expected NAME=VALUE or NAME[node]=VALUE with NAME "
+                             "one of ms, Ts, T, Q (e.g. --op ms=0.05 --op T[outside]=5)")
         name, node, value = m.groups()
         try:
             value = float(value)
         except ValueError:
-            raise ModelError(f"--op {item!r}: {value!r} is not a number") from None
-        if node is None:
-            if isinstance(out.get(name), dict):
-                raise ModelError(f"--op {item!r}: {name} already given per node")
-            out[name] = value
-        else:
-            prev = out.setdefault(name, {})
-            if not isinstance(prev, dict):
-                raise ModelError(f"--op {item!r}: {name} already given for all nodes")
-            prev[node] = value
-    return out
+            raise ModelError(f"--op {item}: {value!r} is not a number") from None
+        key = "*" if node is None else node.strip()
+        prev = out.setdefault(name, {})
+        if key in prev and prev[key] != value:
+            what = "every node" if key == "*" else key
+            raise ModelError(f"--op {item}: {name} for {what} already given as {prev[key]:g}")
+        prev[key] = value
+    # a lone NAME=VALUE stays a number (the form ThermalModel.operating_point documents)
+    return {k: (v["*"] if set(v) == {"*"} else v) for k, v in out.items()}
+
+
+def _plain_errors(func):
+    """Escape rich markup in error messages: ``T[outside]`` must print as written."""
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except ThermctlError as exc:
+            raise type(exc)(escape(str(exc))) from None
+    return wrapper
+
+
+def _read_data(path, model, units):
+    from ..data import read_measurements
+
+    return read_measurements(path, model.network.spec, units=units)
 
 
 @app.command()
 @handle_errors
+@_plain_errors
 def export(
     model_path: Path = typer.Argument(..., metavar="MODEL", help="model.json from `thermctl identify`."),
-    statespace: Path = typer.Option(None, "--statespace", help="Write the linearized StateSpace (.npz)."),
-    casadi_path: Path = typer.Option(None, "--casadi", help="Write CasADi f(x,u) (Function.save); "
-                                     "also FILE.step with F(x,u,dt) and FILE.json with the names."),
-    op: list[str] = typer.Option([], "--op", help="Operating point: NAME=VALUE or NAME\\[node]=VALUE, "
-                                 "NAME in ms (kg/s), Ts (°C), T (°C, boundary), Q (W). Repeatable. "
-                                 "The state is the steady state for these inputs."),
-    dt: float = typer.Option(None, "--dt", help="Discretise the StateSpace by ZOH with this step (s)."),
+    statespace: Path = typer.Option(None, "--statespace", help="Write the linearized StateSpace (.npz) "
+                                    "with the operating point, disturbance inputs and Kalman filter."),
+    casadi_path: Path = typer.Option(None, "--casadi", help="Write CasADi f(x,u) with the identified "
+                                     "parameters built in (Function.save); also FILE.step with "
+                                     "F(x,u,dt) and FILE.json (names, p, operating point, "
+                                     "disturbances, noise model)."),
+    op: list[str] = typer.Option([], "--op", help="Operating point: NAME=VALUE (every node) or "
+                                 "NAME\\[node]=VALUE (one node, wins), NAME in ms (kg/s; with --data "
+                                 "only zones with supply air), Ts (°C), T (°C, boundary), Q (W). "
+                                 "Repeatable. Not given: typical values of --data, else stated "
+                                 "defaults. The state is the steady state for these inputs."),
+    data: Path = typer.Option(None, "--data", help="Measurements of this building: typical flow "
+                              "and supply temperature of the zones with supply air, mean boundary "
+                              "temperatures, for what --op does not give."),
+    units: str = typer.Option("si", help="Units of --data: si (°C, kg/s) or imperial (°F, CFM)."),
+    dt: float = typer.Option(None, "--dt", help="Discretise the StateSpace by ZOH with this step (s); "
+                             "also the stationary Kalman gain at this step."),
     substeps: int = typer.Option(5, "--substeps", help="Sub-steps of the CasADi discrete step."),
 ):
     """Export an identified model for control design.
 
-    Example:  thermctl export out/model.json --statespace ss.npz --op ms=0.05 --op Ts=14 --op T=5 --casadi f.casadi
+    The operating point is printed and stored in the files; the Ts columns of B are zero
+    at zero flow, so give --data or --op ms[zone]=... for zones with supply air.
+
+    Examples:
+      thermctl export out/model.json --statespace ss.npz --data data.csv --dt 600
+      thermctl export out/model.json --statespace ss.npz --op ms=0.05 --op Ts=14 --op T=21 --op "T[outside]=-5"
+      thermctl export out/model.json --casadi f.casadi --data data.csv
     """
+    from .. import export as ex
+
     model = load_model(model_path)
     if statespace is None and casadi_path is None:
         raise ModelError("nothing to export: give --statespace FILE and/or --casadi FILE")
+    meas = _read_data(data, model, units) if data is not None else None
+    point = ex.export_point(model, parse_operating_point(op), data=meas)
+    console.print(escape(point.describe()), highlight=False, soft_wrap=True)
+    dist = ex.disturbances(model)
+    kf = ex.kalman_filter(model, point.op, dt=dt)
+    info = {"operating_point": point.to_dict(), "disturbances": dist.to_dict(),
+            "model": str(model_path)}
+    if dist.names:
+        console.print(escape(f"disturbance inputs (identified): {', '.join(dist.names)}"),
+                      highlight=False)
+    if kf is None:
+        console.print("no Kalman filter exported: the model has no identified noise model "
+                      "(identified with --criterion simulation)", highlight=False)
+    else:
+        console.print(escape(f"Kalman filter: {len(kf.states)} states ({len(kf.states) - model.network.n_states} "
+                             f"gain/sensor states), noise {', '.join(f'{k}={v:.3g}' for k, v in kf.params.items())}"
+                             + ("" if dt else "; give --dt for the stationary gain")), highlight=False)
     if statespace is not None:
-        point = model.operating_point(**parse_operating_point(op))
-        sys = model.to_statespace(point, dt=dt)
-        save_statespace(sys, statespace, op=point)
+        sys, _ = ex.statespace(model, point.op, dt=dt)
+        save_statespace(sys, statespace, op=point.op, info=info,
+                        kalman=None if kf is None else kf.arrays())
         kind = f"discrete, dt={dt:g} s" if dt else "continuous"
         console.print(f"wrote {statespace}: {sys.nstates} states, {sys.ninputs} inputs, "
                       f"{sys.noutputs} outputs ({kind}); load with thermctl.io.load_statespace")
@@ -78,8 +138,16 @@ def export(
         casadi_path.parent.mkdir(parents=True, exist_ok=True)
         f.save(str(casadi_path))
         F.save(str(casadi_path) + ".step")
-        atomic_write_text(str(casadi_path) + ".json", json.dumps(
-            {"states": cm.state_names, "inputs": cm.input_names, "parameters": cm.param_names,
-             "p": cm.p_value.tolist(), "substeps": substeps}, indent=2))
+        doc = {"states": cm.state_names, "inputs": cm.input_names, "parameters": cm.param_names,
+               "p": cm.p_value.tolist(), "substeps": substeps,
+               "signature": "f(x, u) -> xdot and F(x, u, dt) -> x_next, p built in; "
+                            "ThermalModel.to_casadi() gives f(x, u, p), F(x, u, p, dt)",
+               **info, "E": dist.E.tolist()}
+        if kf is not None:
+            doc["noise"] = {"states": kf.states, "Qc_diag": np.diag(kf.Qc).tolist(),
+                            "R_diag": np.diag(kf.R).tolist(), "params": kf.params,
+                            "meaning": "augmented state x, then d[z] (heat gain [W], random "
+                                       "walk, dT[z]/dt += d[z]/C_z); Qc continuous intensity"}
+        atomic_write_text(str(casadi_path) + ".json", json.dumps(doc, indent=2))
         console.print(f"wrote {casadi_path} (f(x,u)), {casadi_path}.step (F(x,u,dt)) and "
                       f"{casadi_path}.json; load with casadi.Function.load")
