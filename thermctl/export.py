@@ -142,7 +142,9 @@ class ExportPoint:
         lines = ["operating point (the linear model is in deviations from it):"]
         for name in ("ms", "Ts", "Q", "T"):
             vals, srcs = self.values[name], self.sources[name]
-            parts = [f"{n}={v:.4g} ({tag[srcs[n]]})" for n, v in vals.items()]
+            # Q = 0 is the natural point (unmeasured gains are the disturbances): no alarm
+            parts = [f"{n}={v:.4g} ({'default' if name == 'Q' else tag[srcs[n]]})"
+                     for n, v in vals.items()]
             lines.append(f"  {name} [{_UNITS[name]}]: " + ", ".join(parts))
         lines += [f"  NOTE: {n}" for n in self.notes]
         return "\n".join(lines)
@@ -202,13 +204,14 @@ def export_point(model: ThermalModel, given: dict | None = None, data=None) -> E
                 vals[n], srcs[n] = _DEFAULTS[name], "default"
         values[name], sources[name] = vals, srcs
     ms_given = given.get("ms")
+    ms_all = ms_given.get("*") if isinstance(ms_given, Mapping) else ms_given   # for every zone
     if fed is not None:
         extra = [z for z in net.zones if z not in fed and values["ms"][z] > 0]
         if extra:
             notes.append(f"supply flow given to zone(s) {extra}, which have no supply air in "
                          f"{data.source}")
-        if "ms" in given and not isinstance(ms_given, Mapping):
-            notes.append(f"ms={float(ms_given):g} kg/s applied to the zones with supply air "
+        if ms_all is not None:
+            notes.append(f"ms={float(ms_all):g} kg/s applied to the zones with supply air "
                          f"{fed} only")
         if not fed:
             notes.append(f"no zone has supply air in {data.source}: ms = 0 kg/s everywhere, so "
@@ -218,8 +221,8 @@ def export_point(model: ThermalModel, given: dict | None = None, data=None) -> E
                      "was given: the Ts columns of B are all zero (a linear model at zero flow "
                      "cannot act through the supply temperature). Give --data DATA (typical "
                      "flow of the zones with supply air) or --op ms[zone]=VALUE")
-    elif "ms" in given and not isinstance(ms_given, Mapping):
-        notes.append(f"ms={float(ms_given):g} kg/s applied to every zone: which zones have supply "
+    elif ms_all is not None:
+        notes.append(f"ms={float(ms_all):g} kg/s applied to every zone: which zones have supply "
                      "air is unknown without --data (use --op ms[zone]=VALUE for some zones only)")
     defaulted = [name for name in ("Ts", "T") if "default" in sources[name].values()]
     if defaulted and data is None:

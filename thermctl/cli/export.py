@@ -66,6 +66,23 @@ def _read_data(path, model, units):
     return read_measurements(path, model.network.spec, units=units)
 
 
+def _identification_data(model):
+    """The data the model was identified from (``meta.data.source``), if still readable."""
+    info = model.meta.get("data") or {}
+    src = info.get("source")
+    if not src or not Path(src).is_file():
+        return None
+    try:
+        meas = _read_data(Path(src), model, info.get("units", "si"))
+    except ThermctlError as exc:
+        console.print(escape(f"not using the identification data {src}: {exc}"), highlight=False,
+                      soft_wrap=True)
+        return None
+    console.print(escape(f"typical inputs from the identification data {src} (--data to use other "
+                         "data)"), highlight=False, soft_wrap=True)
+    return meas
+
+
 @app.command()
 @handle_errors
 @_plain_errors
@@ -84,7 +101,8 @@ def export(
                                  "defaults. The state is the steady state for these inputs."),
     data: Path = typer.Option(None, "--data", help="Measurements of this building: typical flow "
                               "and supply temperature of the zones with supply air, mean boundary "
-                              "temperatures, for what --op does not give."),
+                              "temperatures, for what --op does not give (default: the data the "
+                              "model was identified from, if that file is still there)."),
     units: str = typer.Option("si", help="Units of --data: si (°C, kg/s) or imperial (°F, CFM)."),
     dt: float = typer.Option(None, "--dt", help="Discretise the StateSpace by ZOH with this step (s); "
                              "also the stationary Kalman gain at this step."),
@@ -105,8 +123,9 @@ def export(
     model = load_model(model_path)
     if statespace is None and casadi_path is None:
         raise ModelError("nothing to export: give --statespace FILE and/or --casadi FILE")
-    meas = _read_data(data, model, units) if data is not None else None
-    point = ex.export_point(model, parse_operating_point(op), data=meas)
+    given = parse_operating_point(op)
+    meas = _read_data(data, model, units) if data is not None else _identification_data(model)
+    point = ex.export_point(model, given, data=meas)
     console.print(escape(point.describe()), highlight=False, soft_wrap=True)
     dist = ex.disturbances(model)
     kf = ex.kalman_filter(model, point.op, dt=dt)
