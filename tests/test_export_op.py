@@ -179,11 +179,10 @@ def _demo_workdir(tmp_path, monkeypatch):
     from thermctl.network import ThermalNetwork
     from thermctl.testbed.buildings import pugh_hall_spec
 
-    spec = pugh_hall_spec()
+    spec, _ = pugh_hall_spec()
     (tmp_path / "building.yaml").write_text(yaml.safe_dump(spec.to_dict()))
-    meta = {"greybox": {"params": dict(PARAMS, **{"aperture[r240,south]": 1.0})}}
-    meta["greybox"]["params"] = {k: v for k, v in meta["greybox"]["params"].items()
-                                 if not k.startswith("aperture[r1") and not k.startswith("aperture[r2")}
+    params = {k: v for k, v in PARAMS.items() if not k.startswith("aperture")}
+    meta = {"greybox": {"params": {**params, "aperture[r240,south]": 1.0}}}
     save_model(ThermalModel(ThermalNetwork(spec, [("r240", "r243")]), meta=meta),
                tmp_path / "out" / "model.json")
     monkeypatch.chdir(tmp_path)
