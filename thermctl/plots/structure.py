@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
+from matplotlib.textpath import TextPath
 
 from ..errors import DataError
 
@@ -23,11 +24,32 @@ def _check_fitted(sid):
         raise DataError("the StructureIdentifier is not fitted; call fit(data, network) first")
 
 
+def _node_sizes(labels, square: bool = False, fontsize: float = 7.0, pad: float = 3.0,
+                smallest: float = 22.0, largest: float = 40.0) -> tuple[float, dict]:
+    """Marker size [pt] that holds every label, and each label's font size [pt].
+
+    A circle's diameter is the diagonal of the widest label's box plus a margin, a
+    square's side the box's width plus a margin, between ``smallest`` and ``largest``; a
+    label still too wide at ``largest`` gets a smaller font.
+    """
+    def need(label):
+        ext = TextPath((0, 0), label, size=fontsize).get_extents()
+        w, h = ext.width, max(ext.height, 0.75 * fontsize)
+        return (w if square else float(np.hypot(w, h))) + 2 * pad
+
+    needs = {lab: need(lab) for lab in labels}
+    d = min(largest, max([smallest, *needs.values()]))
+    fonts = {lab: fontsize if n <= d else fontsize * (d - 2 * pad) / (n - 2 * pad)
+             for lab, n in needs.items()}
+    return d, fonts
+
+
 def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5), network=None, title=None) -> Figure:
     """The thermal network with conduction (solid) and convection (dashed) edges.
 
     Like paper Fig. 3: zones are circles (hollow if unmeasured), boundary nodes grey
-    squares; each convection edge is labelled with its score.
+    squares, both sized so that their names fit inside; each convection edge is labelled
+    with its score.
 
     Parameters
     ----------
@@ -74,16 +96,20 @@ def plot_network(sid, seed: int = 0, figsize=(7.0, 5.5), network=None, title=Non
             ax.text((x0 + x1) / 2, (y0 + y1) / 2, f"{s:.2f}", color="tab:red", fontsize=8,
                     ha="center", va="center", zorder=4,
                     bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
+    d, fonts = _node_sizes([str(z) for z in net.zones])
+    side, box_fonts = _node_sizes([str(b) for b in net.boundary], square=True)
+    fonts.update(box_fonts)
     for node in g.nodes:
         x, y = pos[node]
         if node in net.boundary:
-            ax.scatter([x], [y], s=420, marker="s", c="0.8", edgecolors="0.3", zorder=3)
+            ax.scatter([x], [y], s=side ** 2, marker="s", c="0.8", edgecolors="0.3",
+                       zorder=3, gid=f"node:{node}")
         else:
             measured = node in net.measured_zones
-            ax.scatter([x], [y], s=520, marker="o", c="tab:blue" if measured else "white",
-                       edgecolors="tab:blue", linewidths=1.5, zorder=3)
-        ax.text(x, y, node, fontsize=7, ha="center", va="center", zorder=5,
-                color="white" if node in net.measured_zones else "black")
+            ax.scatter([x], [y], s=d ** 2, marker="o", c="tab:blue" if measured else "white",
+                       edgecolors="tab:blue", linewidths=1.5, zorder=3, gid=f"node:{node}")
+        ax.text(x, y, node, fontsize=fonts[str(node)], ha="center", va="center", zorder=5,
+                color="white" if node in net.measured_zones else "black", gid=f"label:{node}")
     ax.legend(handles=[Line2D([], [], color="0.35", lw=1.5, label="conduction"),
                        Line2D([], [], color="tab:red", ls="--", lw=2, label="convection (score)")],
               loc="best", fontsize=8)
