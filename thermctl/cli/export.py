@@ -111,11 +111,11 @@ def export(
     """Export an identified model for control design.
 
     The operating point is printed and stored in the files; the Ts columns of B are zero
-    at zero flow, so give --data or --op ms[zone]=... for zones with supply air.
+    at zero flow, so give --data or --op ms\\[zone]=... for zones with supply air.
 
     Examples:
       thermctl export out/model.json --statespace ss.npz --data data.csv --dt 600
-      thermctl export out/model.json --statespace ss.npz --op ms=0.05 --op Ts=14 --op T=21 --op "T[outside]=-5"
+      thermctl export out/model.json --statespace ss.npz --op ms=0.05 --op Ts=14 --op T=21 --op "T\\[outside]=-5"
       thermctl export out/model.json --casadi f.casadi --data data.csv
     """
     from .. import export as ex
