@@ -204,3 +204,44 @@ def test_docs_say_how_to_call_what_they_show():
     assert "f(x, u)" in cli and "p_value" in cli  # the CLI's f has p built in
     mpc = (ROOT / "docs" / "mpc.md").read_text() + (ROOT / "docs" / "operating-point.md").read_text()
     assert "step_response" in mpc and "input_labels.index" in mpc
+
+
+# ------------------------------------------------------------------ item 8: documentation
+def test_docs_config_math_api_and_pages():
+    cfg = yaml.safe_load((ROOT / "mkdocs.yml").read_text().replace("!!python", "#"))
+    assert any("mathjax" in str(js).lower() for js in cfg.get("extra_javascript", []))
+    nav = json.dumps(cfg["nav"])
+    assert "operating-point.md" in nav
+    api = (ROOT / "docs" / "api.md").read_text()
+    for obj in ("thermctl.reduce", "GreyboxEstimator", "select_edges", "thermctl.export"):
+        assert obj in api, f"docs/api.md lacks {obj}"
+    cli = (ROOT / "docs" / "cli.md").read_text()
+    out = cli[cli.index("## Output files"):]
+    for f in ("model.json", "identification.json", "validation.json", "figures/", "report.html",
+              "ss.npz"):
+        assert f in out, f"docs/cli.md's output files lack {f}"
+    op = (ROOT / "docs" / "operating-point.md").read_text()
+    assert "identification.md#a-real-house" in op and "benchmarks/results/twinhouse.txt" in op
+    assert "solar[" in op and "--op T=21" in op
+
+
+MKDOCS = Path(__import__("sys").executable).with_name("mkdocs")
+
+
+@pytest.mark.skipif(not MKDOCS.exists(), reason="mkdocs not installed (pip install -e '.[docs]')")
+def test_rendered_docs_have_math_and_no_raw_sphinx_roles(tmp_path):
+    import os
+    import subprocess
+
+    res = subprocess.run([str(MKDOCS), "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    site = tmp_path / "site"
+    mpc = (site / "mpc" / "index.html").read_text()
+    assert "mathjax" in mpc.lower() and 'class="arithmatex"' in mpc
+    api = (site / "api" / "index.html").read_text()
+    raw = re.findall(r":(?:func|meth|class|attr|mod|math|data|exc):<code>", api)
+    assert not raw, f"raw Sphinx roles on the API page: {raw[:5]}"
+    assert ".. math::" not in api and 'class="arithmatex"' in api
+    assert "GreyboxEstimator" in api and "select_edges" in api and "balanced_reduction" in api

@@ -166,6 +166,8 @@ def load_model(path) -> ThermalModel:
 def save_statespace(sys, path, op=None, info=None, kalman=None) -> None:
     """Save a ``control.StateSpace`` as ``.npz``: ``A, B, C, D, dt`` and the signal names.
 
+    Load with `load_statespace`.
+
     Parameters
     ----------
     sys : control.StateSpace
@@ -178,8 +180,6 @@ def save_statespace(sys, path, op=None, info=None, kalman=None) -> None:
     kalman : dict, optional
         Arrays and name lists of the identified Kalman filter
         (``thermctl.export.KalmanFilter.arrays``), stored as ``kf_<name>``.
-
-    Load with :func:`load_statespace`.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -432,13 +432,13 @@ class ThermalModel:
         ----------
         x : array_like, optional
             State [°C]; default: the steady state for these inputs.
-        ms, Ts, T, Q : float or mapping
-            Supply flow per zone [kg/s], supply temperature per zone [°C], boundary
-            temperatures [°C], heat per zone [W]: one value for every node, or a mapping
-            by node name. In a mapping the key ``"*"`` gives the value of every node not
-            named, e.g. ``T={"*": 21.0, "outside": -5.0}`` (all boundaries at 21 °C but
-            the outside at −5 °C). A mapping for ``T`` must cover every boundary node,
-            by name or through ``"*"``.
+        **inputs : float or mapping
+            ``ms`` supply flow per zone [kg/s], ``Ts`` supply temperature per zone [°C],
+            ``T`` boundary temperatures [°C], ``Q`` heat per zone [W]: one value for every
+            node, or a mapping by node name. In a mapping the key ``"*"`` gives the value
+            of every node not named, e.g. ``T={"*": 21.0, "outside": -5.0}`` (all
+            boundaries at 21 °C but the outside at −5 °C). A mapping for ``T`` must cover
+            every boundary node, by name or through ``"*"``.
 
         Examples
         --------
