@@ -196,8 +196,8 @@ def test_apertures_summarised(outdir):
     names = [cells[0] for _, cells in rows]
     assert [n for n in names if n.startswith("aperture[r")] == ["aperture[r240,solar_s]",
                                                                 "aperture[r243,solar_w]"]
-    summary = [cells for _, cells in rows if cells[0] == "aperture[…]"]
-    assert summary and "40 others 0" in summary[0][2]
+    summary = [cells for _, cells in rows if cells[0].startswith("aperture[…]")]
+    assert summary and "40 others" in summary[0][0] and summary[0][2] == "0"
     assert len(rows) < 12  # not 42 aperture rows
 
 
@@ -232,7 +232,8 @@ def test_validation_of_another_run_is_left_out(outdir):
     top = page[:page.index("<h2>Data quality</h2>")]
     assert "class='problems'" in top and "run-b" in top
     assert "<h2>Validation</h2>" not in page
-    assert "Use the identified model" not in page
+    assert "Use the identified model" not in page and "No verdict" in top
+    assert "thermctl validate" in top  # the next step: validate this model
     assert "Open loop of r240" not in page
 
 

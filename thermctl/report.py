@@ -36,7 +36,7 @@ padding:0 1em;color:#222;line-height:1.45}
 h1{border-bottom:2px solid #345;padding-bottom:.2em}h2{color:#345;margin-top:1.6em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#eef2f6}
-td:first-child,th:first-child{text-align:left}td.text{text-align:left}
+td:first-child,th:first-child,.text{text-align:left}
 tr.bound td{background:#fff3f0}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
 figcaption{font-size:.9em;color:#555}
@@ -91,23 +91,36 @@ def _esc(v) -> str:
 
 def _table(rows: list[dict], floatfmt: str = "{:.4g}", percent: bool = False,
            classes: list[str] | None = None) -> str:
-    """An HTML table; ``percent`` shows float cells (fractions) as percentages."""
+    """An HTML table; ``percent`` shows float cells (fractions) as percentages.
+
+    Columns of numbers are right-aligned, columns of words left-aligned.
+    """
     if not rows:
         return ""
     cols = list(rows[0])
-    head = "".join(f"<th>{_esc(c)}</th>" for c in cols)
+
+    def cell(v):
+        if isinstance(v, float):
+            return f"{100 * v:.1f} %" if percent else floatfmt.format(v)
+        return str(v)
+
+    text = {c for c in cols if any(not _numeric(cell(r.get(c, ""))) for r in rows if r.get(c, "") != "")}
+    align = {c: " class='text'" if c in text else "" for c in cols}
+    head = "".join(f"<th{align[c]}>{_esc(c)}</th>" for c in cols)
     body = []
     for i, r in enumerate(rows):
-        cells = []
-        for c in cols:
-            v = r.get(c, "")
-            if isinstance(v, float):
-                v = f"{100 * v:.1f} %" if percent else floatfmt.format(v)
-            cls = " class='text'" if isinstance(v, str) and len(v) > 24 else ""
-            cells.append(f"<td{cls}>{_esc(v)}</td>")
+        cells = "".join(f"<td{align[c]}>{_esc(cell(r.get(c, '')))}</td>" for c in cols)
         cls = f" class='{classes[i]}'" if classes and classes[i] else ""
-        body.append(f"<tr{cls}>" + "".join(cells) + "</tr>")
+        body.append(f"<tr{cls}>{cells}</tr>")
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+
+
+def _numeric(v: str) -> bool:
+    try:
+        float(v.replace("%", "").replace(" ", "").replace("−", "-"))
+    except ValueError:
+        return False
+    return True
 
 
 def _text(content: str) -> str:
@@ -275,8 +288,8 @@ def _parameter_rows(ident: dict) -> tuple[list[dict], list[str], list[str]]:
             add(n, group, v, GROUP_UNITS.get(group, ""), bounds.get(n, ""))
         zero = len(items) - len(nonzero)
         if zero:
-            rows.append({"parameter": f"{group}[…]", "meaning": _MEANING[group],
-                         "value": f"{len(nonzero) and 'the ' + str(zero) + ' others' or 'all ' + str(zero)} 0",
+            rows.append({"parameter": f"{group}[…]: {zero} {'others' if nonzero else 'all'}",
+                         "meaning": _MEANING[group], "value": "0",
                          "unit": GROUP_UNITS.get(group, ""), icol: "", "on a bound": ""})
             classes.append("")
     return rows, classes, flagged
@@ -293,7 +306,8 @@ def _parameter_table(ident: dict) -> str:
 
 
 # ---------------------------------------------------------------------------- the top
-def _summary(outdir: Path, ident: dict | None, valid: dict | None, problems: list[str]) -> str:
+def _summary(outdir: Path, ident: dict | None, valid: dict | None, problems: list[str],
+             left_out: bool = False) -> str:
     out = []
     if problems:
         out.append("<div class='problems'><strong>This directory is not consistent.</strong><ul>"
@@ -312,6 +326,9 @@ def _summary(outdir: Path, ident: dict | None, valid: dict | None, problems: lis
     elif valid is not None:
         out.append("<p class='verdict'>validation.json holds no verdict and no errors to weigh; "
                    "see the validation section.</p>")
+    elif left_out:
+        out.append("<p class='verdict against'><strong>No verdict.</strong> The validation here "
+                   "describes another identification run (see above).</p>")
     else:
         out.append("<p class='verdict against'><strong>Not validated yet.</strong> The identified "
                    "model has not been compared with the conduction-only model on held-back data.</p>")
@@ -430,7 +447,7 @@ def build_report(outdir, title: str | None = None) -> Path:
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{_esc(name)}"
              f"</title><style>{_CSS}</style></head><body><h1>{_esc(name)}</h1>",
              f"<p class='muted'>Built from {', '.join(sources)} in {_esc(outdir)}.</p>",
-             _summary(outdir, ident, valid, problems)]
+             _summary(outdir, ident, valid, problems, left_out=not valid_ok)]
     sections = SECTIONS + sorted({b["section"] for b in blocks} - set(SECTIONS))
     for sec in sections:
         sec_blocks = [b for b in blocks if b["section"] == sec]
