@@ -15,9 +15,44 @@ app = typer.Typer(
 
 
 
+def _version(value: bool):
+    if value:
+        from .. import __version__
+        typer.echo(f"thermctl {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root():
-    """thermctl: building thermal network identification for MPC."""
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+    sep: str = typer.Option(",", "--sep", envvar="THERMCTL_SEP",
+                            help="Data files: CSV field separator, e.g. ';' (then decimal "
+                                 "commas are read too)."),
+    time_format: str = typer.Option(None, "--time-format", envvar="THERMCTL_TIME_FORMAT",
+                                    help="Data files: how 'time' is written: iso (default), "
+                                         "excel (serial days), unix (seconds) or a strptime "
+                                         "format such as '%d.%m.%Y %H:%M'."),
+    allow_odd_units: bool = typer.Option(False, "--allow-odd-units",
+                                         help="Data files: read a zone temperature column "
+                                              "whose level does not fit --units (e.g. °F "
+                                              "read as °C) as given, with a warning, instead "
+                                              "of stopping."),
+    average_conflicts: bool = typer.Option(False, "--average-conflicts",
+                                           help="Data files: average rows that repeat a time "
+                                                "stamp with different values (a clock set "
+                                                "back) instead of stopping."),
+):
+    """thermctl: building thermal network identification for MPC.
+
+    Options before the command say how data files are read, for every command:
+      thermctl --sep ';' --time-format excel identify data.csv -b building.yaml
+    """
+    from ._common import read_options
+    read_options.sep = sep
+    read_options.time_format = time_format
+    read_options.allow_odd_units = allow_odd_units
+    read_options.average_conflicts = average_conflicts
 
 
 # Command modules register themselves on `app` when imported.

@@ -12,28 +12,39 @@ import typer
 from rich.table import Table
 
 from ..data import read_measurements
-from ..errors import DataError, ModelError
+from ..errors import DataError, ModelError, ThermctlError
 from ..io import load_model
-from ..outputs import support_note as _support_note
 from ..spec import load_spec
 from . import app
-from ._common import console, handle_errors, progress
+from ._common import console, handle_errors, progress, read_options
 
 UNITS_HELP = "Units of the data file: si (°C, kg/s) or imperial (°F, CFM)."
 
 
-def _progress_callback(bar):
-    tasks = {}
+def _progress_callback(reporter):
+    """``cb(stage, done, total)`` of a :func:`~._common.progress` reporter."""
+    return reporter.callback()
 
-    def cb(stage, done, total):
-        if stage not in tasks:
-            tasks[stage] = bar.add_task(stage, total=total)
-        bar.update(tasks[stage], completed=done, total=total)
-    return cb
+
+def _read_data(data: Path, spec, units: str, **kwargs):
+    """read_measurements with the root options (--sep, --time-format, --allow-odd-units...)."""
+    return read_measurements(data, spec, units=units, **read_options.kwargs(), **kwargs)
+
+
+def _check_not_swapped(data: Path, building: Path) -> None:
+    """DATA and --building given the wrong way round: say so before the spec parser fails."""
+    spec_like = (".yaml", ".yml", ".json")
+    if Path(data).suffix.lower() in spec_like and Path(building).suffix.lower() not in spec_like:
+        raise DataError(f"{data}: DATA looks like a building spec and --building {building} like "
+                        "data; did you swap DATA and --building?")
 
 
 def _truth_model(truth_path: Path | None, data_path: Path, spec):
-    """The true model of testbed data: --truth FILE, or truth.json beside the data."""
+    """The true model of testbed data: --truth FILE, or truth.json beside the data.
+
+    A truth.json beside the data that is not a testbed truth of this building (another
+    tool's file of the same name) is ignored with a note; a --truth FILE must be one.
+    """
     from ..model import ThermalModel
     from ..network import ThermalNetwork
     from ..testbed.output import load_truth
@@ -43,8 +54,15 @@ def _truth_model(truth_path: Path | None, data_path: Path, spec):
         if truth_path is not None:
             raise DataError(f"{truth_path}: truth file not found")
         return None
-    truth = load_truth(path)
-    return ThermalModel(ThermalNetwork(spec, truth.edges), truth.rbar_v, truth.c_v)
+    try:
+        truth = load_truth(path)
+        return ThermalModel(ThermalNetwork(spec, truth.edges), truth.rbar_v, truth.c_v)
+    except ThermctlError as exc:
+        if truth_path is not None:
+            raise
+        console.print(f"note: ignored {path}: not a testbed truth of this building ({exc}); "
+                      "pass --truth FILE to use one", highlight=False, soft_wrap=True)
+        return None
 
 
 @app.command()
@@ -96,8 +114,9 @@ def identify(
     from ..outputs import write_outputs
 
     t0 = time.perf_counter()
+    _check_not_swapped(data, building)
     spec = load_spec(building)
-    meas = read_measurements(data, spec, units=units, gap_limit=gap_limit)
+    meas = _read_data(data, spec, units, gap_limit=gap_limit)
     console.print(meas.quality.summary(), highlight=False)
     opt = IdentifyOptions(criterion=criterion, selection=selection, candidates=candidates,
                           margin=margin, selection_criterion=selection_criterion, solar=solar,
@@ -106,7 +125,7 @@ def identify(
                           window_hours=window_hours, initial_state=initial_state, grid=grid,
                           calibration=_window(calibration, "--calibration"),
                           validation=_window(validation, "--validation"))
-    with progress() as bar:
+    with progress("identify") as bar:
         ident = run_identify(meas, opt, progress=_progress_callback(bar))
     paths = write_outputs(ident, out)
     _print_identification(ident)
@@ -187,7 +206,7 @@ def validate(
 
     model = load_model(model_path)
     spec = model.network.spec
-    meas = read_measurements(data, spec, units=units)
+    meas = _read_data(data, spec, units)
     cal, val = meas.split(validation=_window(validation, "--validation")
                           or _saved_window(model, "validation"))
     truth_model = _truth_model(truth, data, spec)
@@ -197,6 +216,7 @@ def validate(
                           calibration=cal if kstep else None, solar=solar)
     outdir = out or model_path.parent
     doc = validation_document(vr)
+    _with_verdict(doc, vr)
     with staged_output(outdir) as tmp:
         (tmp / "validation.json").write_text(json.dumps(doc, indent=2))
         from ..plots.validate import plot_open_loop, plot_step_responses
@@ -209,6 +229,20 @@ def validate(
     _print_validation(vr)
     console.print(f"wrote {Path(outdir) / 'validation.json'}")
     return vr
+
+
+def _with_verdict(doc: dict, vr) -> dict:
+    """The verdict (:attr:`ValidationReport.verdict`) into validation.json and its report note.
+
+    The note weighs every horizon (issue 22: a model worse at 1-6 h was called supported
+    because it won at 24 h); ``doc["verdict"]`` holds the per-horizon numbers behind it.
+    """
+    from ..validate import support_note
+    doc["verdict"] = vr.verdict.to_dict()
+    for block in doc.get("report", []):
+        if block.get("kind") == "note" and block.get("title") == "What the data can support":
+            block["content"] = support_note(vr)
+    return doc
 
 
 def _saved_window(model, key):
@@ -235,7 +269,10 @@ def _print_validation(vr):
         for k, e in vr.step_errors.items():
             t.add_row(k, *[f"{100 * v:.1f} %" for v in e])
         console.print(t)
-    console.print(_support_note(vr), highlight=False)
+    from ..validate import support_note
+    v = vr.verdict
+    colour = {"identified": "green", "mixed": "yellow"}.get(v.recommendation, "yellow")
+    console.print(f"[bold {colour}]verdict:[/] {support_note(vr)}", highlight=False)
 
 
 @app.command()
@@ -270,7 +307,7 @@ def simulate(
     from ..io import atomic_write_text
     model = load_model(model_path)
     net = model.network
-    meas = read_measurements(data, net.spec, units=units)
+    meas = _read_data(data, net.spec, units)
     win = meas.window(start=start, duration=None if hours is None else f"{hours}h")
     zt = win.zone_temperatures()
     T0 = [zt[z].iloc[0] if z in zt else np.nan for z in net.zones]
