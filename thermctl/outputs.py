@@ -7,10 +7,14 @@ call it), so the pipeline itself needs neither :mod:`thermctl.report` nor :mod:`
 
 from __future__ import annotations
 
+import errno
+import hashlib
 import json
+import secrets
 import shutil
 import tempfile
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -24,7 +28,21 @@ if TYPE_CHECKING:  # only for annotations: keeps `import thermctl.outputs` light
     from .identify import Identification
 
 __all__ = ["staged_output", "write_outputs", "identification_document", "validation_document",
-           "support_note"]
+           "support_note", "check_outdir", "check_consistent", "new_run_id"]
+
+
+# What thermctl writes into an output directory. The run outputs belong to one
+# identification: identify replaces all of them, so none of an earlier run's survive to be
+# mixed with the new one (issue 22). Files not in this list are never deleted.
+RUN_FILES = ("identification.json", "model.json", "validation.json", "reduction.json",
+             "figures.json", "report.html")
+FIGURES = "figures"
+# written by thermctl but belonging to no identification (the demo's testbed data, which
+# identify then reads): neither replaced nor counted as foreign
+KEPT = ("testbed",)
+
+# the documents that name the identification they belong to, and under which key
+_REFERS = {"validation.json": "identification_run_id", "reduction.json": "identification_run_id"}
 
 
 @dataclass
@@ -32,19 +50,31 @@ class staged_output:
     """Write into a temporary sibling directory; move files into place only on success.
 
     So outputs appear complete or not at all: a failed run leaves ``outdir`` as it was.
+
+    Parameters
+    ----------
+    outdir : str or Path
+    replace : bool
+        ``True`` (identify): the staged files are the complete set of run outputs; every
+        run output of an earlier run (:data:`RUN_FILES` and the figures its ``figures.json``
+        lists) is removed, other files are kept. ``False`` (validate): the staged files are
+        added to the run outputs already there, which must belong to the same identification.
     """
 
     outdir: Path
+    replace: bool = False
 
     def __enter__(self) -> Path:
         self.outdir = Path(self.outdir)
+        if self.replace:
+            check_outdir(self.outdir)
         parent = self.outdir.resolve().parent
         try:
             parent.mkdir(parents=True, exist_ok=True)
             self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.outdir.name}.", dir=parent))
         except OSError as exc:
             raise DataError(f"{self.outdir}: cannot write the output directory ({exc.strerror})") from None
-        if self.outdir.exists():
+        if self.outdir.exists() and not self.replace:
             # keep what is already there (e.g. identify's files when validate adds its own)
             for f in ("figures.json",):
                 if (self.outdir / f).exists():
@@ -55,31 +85,210 @@ class staged_output:
         if exc_type is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
             return False
+        backup = None
         try:
-            self.outdir.mkdir(parents=True, exist_ok=True)
-            for src in sorted(self._tmp.rglob("*")):
-                dst = self.outdir / src.relative_to(self._tmp)
-                if src.is_dir():
-                    dst.mkdir(parents=True, exist_ok=True)
-                else:
-                    src.replace(dst)
+            if not self.replace:
+                problems = _problems(_documents(self.outdir) | _documents(self._tmp))
+                if problems:
+                    raise DataError(f"{self.outdir}: {problems[0]}; write into the model's own "
+                                    "directory or an empty --out")
+            old = _run_outputs(self.outdir) if self.replace else []
+            new = sorted(f for f in self._tmp.rglob("*") if not f.is_dir())
+            try:
+                self.outdir.mkdir(parents=True, exist_ok=True)
+                # the earlier run's outputs go aside first, so that a failure while moving
+                # the new ones in can put them back
+                backup = Path(tempfile.mkdtemp(prefix=f".{self.outdir.name}.old.",
+                                               dir=self.outdir.resolve().parent)) if old else None
+                for f in old:
+                    _move(self.outdir / f, backup / f)
+                placed = []
+                try:
+                    for src in new:
+                        rel = src.relative_to(self._tmp)
+                        _move(src, self.outdir / rel)
+                        placed.append(rel)
+                except BaseException:
+                    for rel in placed:
+                        (self.outdir / rel).unlink(missing_ok=True)
+                    for f in old:
+                        _move(backup / f, self.outdir / f)
+                    raise
+            except OSError as exc:
+                raise DataError(f"{self.outdir}: cannot write the outputs ({exc.strerror})") from None
+            figdir = self.outdir / FIGURES
+            if old and figdir.is_dir() and not any(figdir.iterdir()):
+                figdir.rmdir()
         finally:
             shutil.rmtree(self._tmp, ignore_errors=True)
+            if backup is not None:
+                shutil.rmtree(backup, ignore_errors=True)
         return False
+
+
+def _move(src: Path, dst: Path) -> None:
+    """Rename ``src`` to ``dst`` (a file), across file systems if need be."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        src.replace(dst)
+    except OSError as exc:
+        if exc.errno != errno.EXDEV:
+            raise
+        shutil.copy2(src, dst)   # the staging directory is a sibling: --out may be a mount point
+        src.unlink()
+
+
+def _run_outputs(outdir: Path) -> list[Path]:
+    """Run outputs of an earlier run in ``outdir``, relative to it: only files thermctl wrote."""
+    if not outdir.is_dir():
+        return []
+    out = [Path(f) for f in RUN_FILES if (outdir / f).is_file()]
+    # figures: only those the manifest lists (save_figure writes both); anything else a
+    # user put in figures/ stays
+    for entry in _figure_manifest(outdir):
+        rel = Path(FIGURES) / f"{entry}.png"
+        if (outdir / rel).is_file():
+            out.append(rel)
+    return out
+
+
+def _figure_manifest(outdir: Path) -> list[str]:
+    try:
+        manifest = json.loads((outdir / "figures.json").read_text())
+        return [str(m["name"]) for m in manifest if "/" not in str(m["name"])]
+    except (OSError, ValueError, TypeError, KeyError):
+        return []
+
+
+def check_outdir(outdir) -> None:
+    """Refuse an output directory that holds other files and no thermctl outputs.
+
+    thermctl replaces its own outputs in ``outdir`` and never deletes other files; but
+    writing into a directory of someone else's files (``--out .`` in a home directory, the
+    data directory) would mix them, so that is refused. Hidden files (``.gitignore``) and the
+    demo's ``testbed/`` do not count. Cheap: the CLI may call it before a long identification.
+
+    Raises
+    ------
+    DataError
+        ``outdir`` is a file, or a non-empty directory with no thermctl outputs.
+    """
+    outdir = Path(outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise DataError(f"{outdir}: exists and is not a directory; choose another --out")
+    if not outdir.is_dir():
+        return
+    names = {p.name for p in outdir.iterdir() if not p.name.startswith(".")}
+    ours = names & (set(RUN_FILES) | {FIGURES})
+    foreign = sorted(names - set(RUN_FILES) - {FIGURES} - set(KEPT))
+    if foreign and not ours:
+        raise DataError(f"{outdir}: not empty and holds no thermctl outputs ({', '.join(foreign[:3])}"
+                        f"{', ...' if len(foreign) > 3 else ''}); choose an empty or new --out directory")
+
+
+def new_run_id(model: ThermalModel, created: str) -> str:
+    """Identifier of one identification: hex digest of the model document, its creation time and a nonce.
+
+    Parameters
+    ----------
+    model : ThermalModel
+    created : str
+        Creation time (ISO 8601, UTC).
+
+    Returns
+    -------
+    str
+        16 hex digits (64 bits: two runs never share one in practice).
+    """
+    doc = model_to_dict(model)
+    doc["meta"] = {k: v for k, v in doc["meta"].items() if k not in ("run_id", "created")}
+    # and a nonce: the same model written twice within a clock tick is still two runs
+    body = json.dumps(doc, sort_keys=True, default=_plain) + created + secrets.token_hex(8)
+    return hashlib.sha256(body.encode()).hexdigest()[:16]
+
+
+def _documents(outdir: Path) -> dict:
+    """File name → parsed JSON (or the exception) of the run documents in ``outdir``."""
+    docs = {}
+    for name in ("identification.json", "model.json", *_REFERS):
+        p = Path(outdir) / name
+        if p.is_file():
+            try:
+                docs[name] = json.loads(p.read_text())
+            except (OSError, ValueError) as exc:
+                docs[name] = exc
+    return docs
+
+
+def _problems(docs: dict) -> list[str]:
+    out = [f"{name}: unreadable ({exc})" for name, exc in docs.items() if isinstance(exc, Exception)]
+    docs = {k: v for k, v in docs.items() if isinstance(v, dict)}
+    ident = docs.get("identification.json", {}).get("run_id")
+    model = (docs.get("model.json", {}).get("meta") or {}).get("run_id")
+    if "identification.json" in docs and "model.json" in docs and ident != model:
+        out.append(f"model.json (run {model}) is not the model of identification.json (run {ident}); "
+                   "re-run `thermctl identify`")
+    ref = ident or model
+    for name, key in _REFERS.items():
+        if name not in docs or ref is None:
+            continue   # nothing to belong to, or outputs from before run ids: cannot tell
+        got = docs[name].get(key)
+        if got is None:
+            out.append(f"{name} does not name the identification it belongs to (no run id), "
+                       f"and run {ref} is here; re-run it")
+        elif got != ref:
+            out.append(f"{name} belongs to identification run {got}, not to run {ref} here; re-run it")
+    return out
+
+
+def check_consistent(outdir) -> list[str]:
+    """Problems that show the outputs in ``outdir`` come from more than one run.
+
+    Every identification has a ``run_id`` (``identification.json["run_id"]``,
+    ``model.json["meta"]["run_id"]``); ``validation.json`` (and ``reduction.json``, when it
+    says) name the run they belong to as ``identification_run_id``. A report built from
+    pieces of different runs would show, e.g., a validation of a model that is no longer there.
+
+    Parameters
+    ----------
+    outdir : str or Path
+
+    Returns
+    -------
+    list of str
+        One line per problem, naming the file; empty when the pieces belong together (or
+        ``outdir`` holds no identification to compare with).
+    """
+    return _problems(_documents(Path(outdir)))
 
 
 def write_outputs(ident: Identification, outdir) -> dict:
     """Write ``model.json``, ``identification.json`` and the figures into ``outdir``.
 
+    They replace every output of an earlier run there (``validation.json``, ``figures/``, the
+    report...): these would describe another model. Files thermctl did not write are kept;
+    a non-empty ``outdir`` without thermctl outputs is refused (:func:`check_outdir`). The
+    identification gets a ``run_id`` (:func:`new_run_id`, also put in ``ident.model.meta``).
+
     Returns
     -------
     dict
         Role → path.
+
+    Raises
+    ------
+    DataError
+        ``outdir`` cannot be written, or holds other files and no thermctl outputs.
     """
     from .plots.structure import plot_correlations, plot_network, plot_scores
     from .report import save_figure
 
-    with staged_output(outdir) as tmp:
+    check_outdir(outdir)   # before drawing figures: refusing is cheap
+    meta = ident.model.meta
+    if "run_id" not in meta:   # the same identification written again keeps its id
+        meta["created"] = datetime.now(timezone.utc).isoformat()
+        meta["run_id"] = new_run_id(ident.model, meta["created"])
+    with staged_output(outdir, replace=True) as tmp:
         save_model(ident.model, tmp / "model.json")
         sid = ident.structure
         if sid is not None:
@@ -126,6 +335,7 @@ def identification_document(ident: Identification) -> dict:
     opt = ident.options
     doc = {
         "format": "thermctl-identification", "version": 2,
+        "run_id": model.meta.get("run_id"), "created": model.meta.get("created"),
         "method": ("paper (SIN rule + simulation criterion)" if opt.paper else
                    f"grey-box ({opt.criterion}; structure: "
                    + ("model-based selection" if sel is not None else "SIN rule") + ")"),
@@ -241,8 +451,16 @@ def _edge_time_constants(model: ThermalModel) -> dict:
     return out
 
 
-def validation_document(vr) -> dict:
-    """The content of ``validation.json`` (with the report blocks)."""
+def validation_document(vr, model: ThermalModel | None = None) -> dict:
+    """The content of ``validation.json`` (with the report blocks).
+
+    Parameters
+    ----------
+    vr : ValidationReport
+    model : ThermalModel, optional
+        The validated model: its ``meta["run_id"]`` goes in as ``identification_run_id``,
+        so that :func:`check_consistent` can tell a validation of another run.
+    """
     conv = lambda v: float(vr.to_data_units(v))  # noqa: E731
     rows = []
     for z in vr.open_loop["identified"].zones:
@@ -274,7 +492,9 @@ def validation_document(vr) -> dict:
                        "content": sr_rows})
     blocks.append({"section": "Validation", "kind": "note", "title": "What the data can support",
                    "content": support_note(vr)})
-    return {"format": "thermctl-validation", "version": 1, "window": list(vr.window),
+    return {"format": "thermctl-validation", "version": 1,
+            "identification_run_id": None if model is None else model.meta.get("run_id"),
+            "window": list(vr.window),
             "units": vr.units, "open_loop": rows,
             "rmse_mean": {k: conv(r.rmse_mean) for k, r in vr.open_loop.items()},
             "step_response_error": {k: v.tolist() for k, v in vr.step_errors.items()},

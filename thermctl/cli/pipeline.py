@@ -215,7 +215,7 @@ def validate(
         vr = run_validate(model, val, hours=hours, start=start, truth=truth_model,
                           calibration=cal if kstep else None, solar=solar)
     outdir = out or model_path.parent
-    doc = validation_document(vr)
+    doc = validation_document(vr, model)
     _with_verdict(doc, vr)
     with staged_output(outdir) as tmp:
         (tmp / "validation.json").write_text(json.dumps(doc, indent=2))
