@@ -21,6 +21,7 @@ demo: $(STAMP)
 test: export OPENBLAS_NUM_THREADS = 1
 test: export OMP_NUM_THREADS = 1
 test: $(STAMP)
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 2 -m "not slow" -q
 
 test-all: export OPENBLAS_NUM_THREADS = 1
