@@ -35,7 +35,7 @@ body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:11
 padding:0 1em;color:#222;line-height:1.45}
 h1{border-bottom:2px solid #345;padding-bottom:.2em}h2{color:#345;margin-top:1.6em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#eef2f6}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;white-space:nowrap}.wrap{white-space:normal}th{background:#eef2f6}
 td:first-child,th:first-child,.text{text-align:left}
 tr.bound td{background:#fff3f0}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
@@ -105,7 +105,10 @@ def _table(rows: list[dict], floatfmt: str = "{:.4g}", percent: bool = False,
         return str(v)
 
     text = {c for c in cols if any(not _numeric(cell(r.get(c, ""))) for r in rows if r.get(c, "") != "")}
-    align = {c: " class='text'" if c in text else "" for c in cols}
+    # short cells never break ("[0.000262, 0.000338]"); columns of sentences wrap
+    wrap = {c for c in cols if any(len(cell(r.get(c, ""))) > 32 for r in rows)}
+    align = {c: " class='" + " ".join(k for k, on in (("text", c in text), ("wrap", c in wrap)) if on)
+             + "'" if c in text or c in wrap else "" for c in cols}
     head = "".join(f"<th{align[c]}>{_esc(c)}</th>" for c in cols)
     body = []
     for i, r in enumerate(rows):
