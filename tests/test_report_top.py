@@ -270,3 +270,11 @@ def test_network_labels_fit_inside_their_nodes(small_network):
         square = t.get_text() in small_network.boundary
         need = max(box.width, box.height) if square else np.hypot(box.width, box.height)
         assert need <= size, f"label {t.get_text()!r} ({need:.0f} px) overflows its node ({size:.0f} px)"
+
+
+def test_parameter_table_does_not_depend_on_identifys_blocks(outdir):
+    doc = _identification()
+    doc["report"] = [b for b in doc["report"] if not b["title"].startswith("Grey-box estimate")]
+    (outdir / "identification.json").write_text(json.dumps(doc))
+    rows = {cells[0]: cells for _, cells in _param_rows(_html(outdir))}
+    assert "s/m" in rows["tau0"]

@@ -180,8 +180,8 @@ def _verdict(valid: dict) -> dict | None:
     by :func:`thermctl.validate.verdict`.
     """
     v = valid.get("verdict")
-    if isinstance(v, dict) and v.get("text"):
-        return {"recommendation": v.get("recommendation"), "text": str(v["text"]),
+    if isinstance(v, dict) and (v.get("text") or v.get("recommendation")):
+        return {"recommendation": v.get("recommendation"), "text": str(v.get("text") or ""),
                 "gains": v.get("gains") or {}}
     if isinstance(v, str) and v.strip():
         return {"recommendation": None, "text": v, "gains": {}}
@@ -375,10 +375,17 @@ def _selection_text(b: dict, ident: dict | None) -> str | None:
     return f"<p>{_esc(s)}.</p>"
 
 
+def _is_greybox_table(b: dict) -> bool:
+    """identify's bare table of grey-box values (no units), replaced by :func:`_parameter_table`."""
+    rows = b.get("content") or []
+    return b["kind"] == "table" and (str(b.get("title", "")).startswith("Grey-box estimate")
+                                     or bool(rows) and all(set(r) == {"parameter", "value"} for r in rows))
+
+
 def _block(b: dict, ident: dict | None) -> str:
     title = b.get("title") or ""
     if b["kind"] == "table":
-        if title.startswith("Grey-box estimate") and ((ident or {}).get("greybox") or {}).get("params"):
+        if _is_greybox_table(b) and ((ident or {}).get("greybox") or {}).get("params"):
             return _parameter_table(ident)
         if title.startswith("Model-based selection") and b["content"]:
             sentence = _selection_text(b, ident)
@@ -458,6 +465,9 @@ def build_report(outdir, title: str | None = None) -> Path:
         if not sec_blocks and not sec_figs:
             continue
         parts.append(f"<h2>{_esc(sec)}</h2>")
+        if (sec == "Parameters" and ((ident or {}).get("greybox") or {}).get("params")
+                and not any(_is_greybox_table(b) for b in sec_blocks)):
+            parts.append(_parameter_table(ident))  # identify's blocks changed: still show it
         parts += [_block(b, ident) for b in sec_blocks]
         if sec == "Validation":
             parts.append(_truncation_note(sec_figs, valid))
