@@ -35,7 +35,8 @@ body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:11
 padding:0 1em;color:#222;line-height:1.45}
 h1{border-bottom:2px solid #345;padding-bottom:.2em}h2{color:#345;margin-top:1.6em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;white-space:nowrap}.wrap{white-space:normal}th{background:#eef2f6}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;white-space:nowrap}
+.wrap{white-space:normal}th{background:#eef2f6}
 td:first-child,th:first-child,.text{text-align:left}
 tr.bound td{background:#fff3f0}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
