@@ -82,7 +82,9 @@ class SelectionStep:
 
     Attributes
     ----------
-    action : {"start", "add", "remove", "stop"}
+    action : {"start", "add", "remove", "stop", "keep"}
+        ``keep``: the backward pass ended; ``screened`` holds the criterion change of
+        removing each kept edge.
     edge : str or None
     value : float
         Criterion of the structure after this step (lower is better).
@@ -424,6 +426,11 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
                                  f"(margin {margin:g})")
                 say(f"removed {pick} ({criterion} {d:+.1f})")
             else:
+                # the kept structure's evidence: what removing each edge would cost
+                path.append(SelectionStep("keep", None, val, d, [x.name for x in cur],
+                                          {k: t[0] for k, t in trials.items()},
+                                          note=f"removing any edge costs more than the "
+                                               f"margin {margin:g}"))
                 for k, t in trials.items():
                     if k not in reasons or reasons[k].startswith("added"):
                         reasons[k] = (reasons.get(k, "in") + f"; removing it costs {criterion} "
