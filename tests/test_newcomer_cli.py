@@ -58,6 +58,7 @@ def wrong_model(spec, tb):
 def test_validate_recommends_conduction_only_when_it_wins_at_mpc_horizons(tb, wrong_model):
     res = run("validate", wrong_model, tb["data"], "--hours", 24)
     assert res.exit_code == 0, res.output
+    assert re.search(r"^validate: open loop.* 1/1, elapsed \d+:\d\d, done$", res.output, re.M)
     text = " ".join(res.output.split())
     doc = json.loads((wrong_model.parent / "validation.json").read_text())
     v = doc["verdict"]

@@ -211,9 +211,13 @@ def validate(
                           or _saved_window(model, "validation"))
     truth_model = _truth_model(truth, data, spec)
     solar = model.meta.get("options", {}).get("solar", True)
-    with console.status("validating: open loop, step responses, k-step-ahead filters..."):
+    stage = "open loop, step responses" + (", k-step-ahead filters" if kstep else "")
+    with progress("validate") as bar:       # one long step: a clock, or heartbeat lines
+        cb = _progress_callback(bar)
+        cb(stage, 0, 1)
         vr = run_validate(model, val, hours=hours, start=start, truth=truth_model,
                           calibration=cal if kstep else None, solar=solar)
+        cb(stage, 1, 1)
     outdir = out or model_path.parent
     doc = validation_document(vr, model)
     _with_verdict(doc, vr)
