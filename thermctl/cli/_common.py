@@ -144,18 +144,33 @@ class ProgressReporter:
         now = time.perf_counter() if now is None else now
         t_start = self._stages.get(stage, [now])[0]
         elapsed = now - t_start
-        text = f"{self.name}: {stage} {done}/{total}, elapsed {_clock(elapsed)}"
+        count = f"{done}/{total}" if total else f"{done}"
+        text = f"{self.name}: {stage} {count}, elapsed {_clock(elapsed)}"
         if total and done >= total:
             text += ", done"
-        elif done > 0:
+        elif total and done > 0:
             text += f", ETA ~{_clock(elapsed / done * (total - done))}"
         return text
 
     def callback(self):
         """``cb(stage: str, done: int, total: int)`` for ``progress=`` arguments."""
-        return self.update
+        return self.report
 
-    def update(self, stage: str, done: int, total: int) -> None:
+    # rich.Progress-style use (``task = p.add_task(name); p.update(task, completed=k)``)
+    def add_task(self, description: str, total=None, **_) -> str:
+        """A stage named ``description``; returns its id for :meth:`update`."""
+        self.report(description, 0, total)
+        return description
+
+    def update(self, task: str, *, completed=None, total=None, **_) -> None:
+        """Like :meth:`rich.progress.Progress.update` for a task from :meth:`add_task`."""
+        st = self._stages.get(task)
+        last = st[2] if st is not None and st[2] is not None else (0, None)
+        self.report(task, last[0] if completed is None else int(completed),
+                    last[1] if total is None else total)
+
+    def report(self, stage: str, done: int, total) -> None:
+        """One progress call: ``done`` of ``total`` steps of ``stage`` (total None: unknown)."""
         now = time.perf_counter()
         with self._lock:
             st = self._stages.get(stage)
@@ -194,7 +209,7 @@ class ProgressReporter:
         if self._bar is None:
             return
         elapsed = now - self._stages[stage][0]
-        eta = f"ETA ~{_clock(elapsed / done * (total - done))}" if 0 < done < total else ""
+        eta = f"ETA ~{_clock(elapsed / done * (total - done))}" if total and 0 < done < total else ""
         if stage not in self._tasks:
             self._tasks[stage] = self._bar.add_task(stage, total=total, eta=eta)
         self._bar.update(self._tasks[stage], completed=done, total=total, eta=eta)
