@@ -89,6 +89,24 @@ class IdentifyOptions:
         figure).
     calibration, validation : tuple of str or None
         Date windows ``(start, end)``; default: :meth:`Measurements.split`.
+    scale : {"auto", "global", "local"}
+        ``selection="model"``: ``global`` fits the whole building's likelihood for every
+        candidate (cost ~n³ per evaluation, n = every state); ``local`` splits it into one
+        problem per measured zone (:mod:`thermctl.local`), run in parallel; ``auto``:
+        local above ``local_above`` measured zones.
+    local_above : int
+        Measured zones above which ``scale="auto"`` goes local.
+    combine : {"sum", "both", "either"}
+        ``scale="local"``: how the verdicts of an air path's two ends combine.
+    workers : int or None
+        ``scale="local"``: local processes (default every core).
+    scheduler : str or None
+        ``scale="local"``: a Dask scheduler address (``tcp://host:8786``) to send the local
+        problems to instead of local processes.
+    refit_max_states : int
+        ``scale="local"``: refit the selected structure on the whole building (one shared
+        R̄_v, intervals) when its model has at most this many states; above, the model
+        keeps the local per-edge R̄_v.
     """
 
     criterion: str = "likelihood"
@@ -109,16 +127,37 @@ class IdentifyOptions:
     grid: bool = True
     calibration: tuple | None = None
     validation: tuple | None = None
+    scale: str = "auto"
+    local_above: int = 12
+    combine: str = "sum"
+    workers: int | None = None
+    scheduler: str | None = None
+    refit_max_states: int = 150
 
     def check(self):
         for name, allowed in (("criterion", CRITERIA), ("selection", SELECTIONS),
                               ("candidates", ("sin", "sin+pairs", "all")),
                               ("selection_criterion", ("bic", "aic", "holdout")),
                               ("intervals", ("profile", "wald", "none")),
-                              ("estimator", ("nlp", "single_shooting", "grid", "none"))):
+                              ("estimator", ("nlp", "single_shooting", "grid", "none")),
+                              ("scale", ("auto", "global", "local")),
+                              ("combine", ("sum", "both", "either"))):
             if getattr(self, name) not in allowed:
                 raise DataError(f"identify option {name} must be one of {list(allowed)}, "
                                 f"found {getattr(self, name)!r}")
+
+        if self.scale == "local" and (self.paper or self.selection == "scores"):
+            raise DataError("identify: scale='local' needs selection='model' with a grey-box "
+                            "criterion; the paper's pipeline (--criterion simulation or "
+                            "--selection scores) has no local form yet")
+        if self.workers is not None and self.workers < 1:
+            raise DataError(f"identify option workers must be >= 1, found {self.workers}")
+
+    def is_local(self, spec) -> bool:
+        """Whether this building is identified by local problems."""
+        if self.paper or self.selection == "scores" or self.scale == "global":
+            return False
+        return self.scale == "local" or len(spec.measured_zones) > self.local_above
 
     @property
     def paper(self) -> bool:
@@ -147,6 +186,8 @@ class Identification:
     greybox : GreyboxEstimator or None
         Grey-box pipeline: the final fit of the selected structure.
     intervals : IdentifiabilityReport or None
+    local : LocalIdentification or None
+        Local pipeline: the local problems, their results and the combined verdicts.
     """
 
     model: ThermalModel
@@ -160,10 +201,11 @@ class Identification:
     selection: object = None
     greybox: object = None
     intervals: object = None
+    local: object = None
 
 
 def identify(meas: Measurements, options: IdentifyOptions | None = None,
-             progress=None) -> Identification:
+             progress=None, client=None) -> Identification:
     """Identify the convection edges and their parameters from measured data.
 
     Parameters
@@ -173,6 +215,9 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     options : IdentifyOptions, optional
     progress : callable, optional
         ``progress(stage, done, total)`` for progress bars.
+    client : distributed.Client, optional
+        Local problems go to this Dask cluster (``options.scheduler`` does the same by
+        address).
 
     Returns
     -------
@@ -183,6 +228,8 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
     if opt.paper or opt.selection == "scores":
         ident = _identify_paper(meas, cal, val, opt, progress)
+    elif opt.is_local(meas.spec):
+        ident = _identify_local(meas, cal, val, opt, progress, client)
     else:
         ident = _identify_greybox(meas, cal, val, opt, progress)
     return ident
@@ -321,12 +368,66 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
                           greybox=gb, intervals=ida)
 
 
-def _greybox_fit(net, cal, opt, notes):
+def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
+    """One local problem per measured zone → combined air paths → whole-building refit
+    (small buildings) or the local per-edge R̄_v (large ones)."""
+    from .local import identify_local
+
+    spec = meas.spec
+    notes = []
+    li = identify_local(spec, cal.frame, rule=opt.combine, criterion=opt.selection_criterion,
+                        margin=opt.margin, solar=opt.solar, workers=opt.workers,
+                        client=client or opt.scheduler, progress=progress)
+    logger.info("%s", li.summary())
+    failed = [r for r in li.results if r.error]
+    if failed:
+        notes.append(f"{len(failed)} local problem(s) failed, their air paths are undecided: "
+                     + "; ".join(f"{r.zone}: {r.error}" for r in failed[:5]))
+    net = ThermalNetwork(spec, li.edges)
+    gb = ida = None
+    if not li.edges:
+        notes.append("the local problems support no convection edge: the model is "
+                     "conduction-only")
+    elif net.n_states <= opt.refit_max_states:
+        if progress:
+            progress("whole-building refit", 0, 1)
+        rbs = [v for v in li.rbar_v.values() if np.isfinite(v)]
+        init = {"rbar_v": float(np.exp(np.mean(np.log(rbs))))} if rbs else {}
+        if np.isfinite(li.tau0):
+            init["tau0"] = li.tau0
+        gb, ida = _greybox_fit(net, cal, opt, notes, init=init)
+        _misfit_note(ida, opt, notes)
+        if progress:
+            progress("whole-building refit", 1, 1)
+    else:
+        notes.append(f"the whole-building model has {net.n_states} states (> "
+                     f"{opt.refit_max_states}): R̄_v per air path from the local problems, "
+                     "no whole-building refit and no intervals")
+    meta = _meta(meas, cal, val, opt, {})
+    meta["local"] = {
+        "rule": li.rule, "time_s": li.time, "cpu_s": li.cpu, "tau0": li.tau0,
+        "problems": [{"zone": r.zone, "n_states": r.n_states, "edges": r.edges,
+                      "time_s": r.time, "n_fits": r.n_fits, "error": r.error}
+                     for r in li.results],
+        "verdicts": {v.name: {"kept": v.kept, "evidence": v.evidence, "rbar_v": v.rbar_v,
+                              "reason": v.reason} for v in li.verdicts},
+    }
+    meta["selection"] = {"path": [], "reasons": li.reasons}
+    if gb is not None:
+        meta["greybox"] = _greybox_meta(gb, ida)
+        model = ThermalModel(net, rbar_v=gb.rbar_v_, c_v=gb.c_v_, meta=meta)
+    else:
+        model = li.model(spec, meta=meta)
+    return Identification(model, None, None, None, cal, val, opt, notes, selection=None,
+                          greybox=gb, intervals=ida, local=li)
+
+
+def _greybox_fit(net, cal, opt, notes, init=None):
     """Grey-box fit of a given structure (``selection="scores"`` with a grey-box criterion)."""
     from .greybox import GreyboxEstimator
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
-        gb = GreyboxEstimator(net, criterion=opt.criterion, solar=opt.solar).fit(cal)
+        gb = GreyboxEstimator(net, criterion=opt.criterion, solar=opt.solar).fit(cal, init=init)
     return gb, _intervals(gb, opt, notes)
 
 

@@ -13,10 +13,14 @@ from rich.table import Table
 
 from ..data import read_measurements
 from ..errors import DataError, ModelError, ThermctlError
+from ..identify import IdentifyOptions
 from ..io import load_model
 from ..spec import load_spec
 from . import app
 from ._common import console, handle_errors, progress, read_options
+
+# CLI defaults are read from the dataclass: one place for each default
+_IDENT_DEFAULTS = IdentifyOptions()
 
 UNITS_HELP = "Units of the data file: si (°C, kg/s) or imperial (°F, CFM)."
 
@@ -99,6 +103,15 @@ def identify(
     calibration: str = typer.Option(None, help="Calibration window START..END (dates)."),
     validation: str = typer.Option(None, help="Validation window START..END (dates)."),
     gap_limit: str = typer.Option("30min", help="Longest gap that is interpolated."),
+    scale: str = typer.Option(_IDENT_DEFAULTS.scale, help="--selection model: global (one "
+                              "likelihood of the whole building), local (one small problem per "
+                              "measured zone, in parallel) or auto (local above "
+                              f"{_IDENT_DEFAULTS.local_above} measured zones)."),
+    workers: int = typer.Option(None, min=1, help="Local problems: processes (default: every core)."),
+    scheduler: str = typer.Option(None, help="Local problems: a Dask scheduler address "
+                                  "(tcp://HOST:8786) to run them on instead of local processes."),
+    combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="Local problems: how an air path's "
+                                "two ends decide: sum (of their BIC changes), both or either."),
 ):
     """Identify convection edges and their parameters; write model.json, identification.json, figures.
 
@@ -109,6 +122,8 @@ def identify(
       thermctl identify data.csv --building building.yaml --out out/
       thermctl identify data.csv -b building.yaml --criterion simulation   # the paper's method
       thermctl identify data.csv -b building.yaml --candidates all --no-solar
+      thermctl identify data.csv -b building.yaml --scale local --workers 2    # big buildings
+      thermctl identify data.csv -b building.yaml --scheduler tcp://10.0.0.5:8786
     """
     from ..identify import IdentifyOptions, identify as run_identify
     from ..outputs import write_outputs
@@ -124,7 +139,8 @@ def identify(
                           s_min=s_min, allow_parallel=allow_parallel, estimator=estimator,
                           window_hours=window_hours, initial_state=initial_state, grid=grid,
                           calibration=_window(calibration, "--calibration"),
-                          validation=_window(validation, "--validation"))
+                          validation=_window(validation, "--validation"),
+                          scale=scale, workers=workers, scheduler=scheduler, combine=combine)
     with progress("identify") as bar:
         ident = run_identify(meas, opt, progress=_progress_callback(bar))
     paths = write_outputs(ident, out)
@@ -161,6 +177,8 @@ def _print_identification(ident):
         if out:
             console.print("left out: " + "; ".join(f"{k} ({sel.reasons[k]})" for k in out),
                           highlight=False)
+    if ident.local is not None:
+        console.print(ident.local.summary(), highlight=False)
     if m.network.convection_edges:
         rb = np.atleast_1d(m.rbar_v)
         console.print(f"R̄_v = {', '.join(f'{v:.3g}' for v in rb)} K/(W m), C_v = {float(np.mean(m.c_v)):.3g} J/K"

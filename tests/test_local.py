@@ -1,0 +1,144 @@
+"""Local (per-zone) identification: the split, exact wall aggregation, the combination
+rule, and the runners (serial, processes, Dask LocalCluster) agreeing bit for bit."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from thermctl.data import read_measurements
+from thermctl.errors import EstimationError
+from thermctl.greybox import GreyboxOptions, GreyboxProblem
+from thermctl.greybox.estimator import as_greybox_data
+from thermctl.local import (LocalProblem, LocalResult, combine, fit_local, local_problems,
+                            run_local)
+from thermctl.network import ThermalNetwork
+from thermctl.testbed import generate
+
+
+@pytest.fixture(scope="module")
+def corridor(tmp_path_factory):
+    """A 9-zone corridor floor (4 offices a side, unmeasured hallway), 4 days."""
+    out = tmp_path_factory.mktemp("corr")
+    tb = generate("corridor", zones=9, days=4, seed=2)
+    tb.write(out)
+    from thermctl.spec import load_spec
+    spec = load_spec(out / "building.yaml")
+    meas = read_measurements(out / "data.csv", spec)
+    return spec, meas, tb
+
+
+def test_split_puts_latent_hallway_inside_and_neighbours_outside(corridor):
+    spec, meas, _ = corridor
+    probs = local_problems(spec, meas.frame.columns)
+    assert [p.zone for p in probs] == spec.measured_zones
+    hall = [z for z in spec.zone_names if z not in spec.measured_zones]
+    for p in probs:
+        # zone + the unmeasured hallway are the only zones of the local model
+        assert p.spec.zone_names[0] == p.zone or p.zone in p.spec.zone_names
+        assert set(p.spec.zone_names) == {p.zone, *hall}
+        assert p.spec.measured_zones == [p.zone]
+        # every candidate has the problem's zone as one end, and its other end is a node
+        assert p.candidates and all(p.zone in (a, b) for a, b, _ in p.candidates)
+        nodes = set(p.spec.zone_names) | set(p.spec.boundary)
+        assert all(a in nodes and b in nodes for a, b, _ in p.candidates)
+        # measured neighbours are boundary nodes with their T: column read
+        for b in p.spec.boundary:
+            assert b in p.spec.boundary
+        ThermalNetwork(p.spec, p.candidates)      # a valid network with every candidate
+
+
+def test_aggregated_far_walls_give_the_same_likelihood(corridor):
+    """Merging a hallway's walls to outside offices is exact (superposition), not an
+    approximation: same log-likelihood at the same parameters, fewer states."""
+    spec, meas, _ = corridor
+    cal = meas.frame
+    z = spec.measured_zones[1]
+    pa = local_problems(spec, cal.columns, zones=[z], aggregate=True)[0]
+    pe = local_problems(spec, cal.columns, zones=[z], aggregate=False)[0]
+    assert pa.aggregates and pa.n_states < pe.n_states
+    edge = [pa.candidates[0]]
+    vals = []
+    for p in (pa, pe):
+        net = ThermalNetwork(p.spec, edge)
+        data = as_greybox_data(p.data(cal), net)
+        pb = GreyboxProblem(net, data, GreyboxOptions(per_edge=True, fit_rows="all"))
+        vals.append(pb.nll(pb.layout.eta0()))
+    assert pa.n_states <= pe.n_states - 2 * (len(pa.aggregates[0][1]) - 1)
+    assert vals[0] == pytest.approx(vals[1], rel=1e-9, abs=1e-6)
+
+
+def test_aggregate_mean_is_the_weighted_mean_and_skips_gaps(corridor):
+    spec, meas, _ = corridor
+    p = local_problems(spec, meas.frame.columns, zones=[spec.measured_zones[0]])[0]
+    node, members = p.aggregates[0]
+    f = meas.frame.copy()
+    first = f"T:{members[0][0]}"
+    f.iloc[5, f.columns.get_loc(first)] = np.nan
+    d = p.data(f)
+    w = np.array([s for _, s in members])
+    T = f[[f"T:{m}" for m, _ in members]].to_numpy()
+    assert d[f"T:{node}"].iloc[10] == pytest.approx(T[10] @ w / w.sum(), rel=1e-12)
+    assert d[f"T:{node}"].iloc[5] == pytest.approx(T[5, 1:] @ w[1:] / w[1:].sum(), rel=1e-12)
+
+
+def _fake(zone, kept, ev, rb=None):
+    return LocalResult(zone, kept, ev, rb or {k: 3e-4 for k in kept}, 2.0, 10)
+
+
+def test_combine_rules_on_known_votes(small_spec):
+    probs = local_problems(small_spec)
+    by = {p.zone: p for p in probs}
+    assert set(by) == {"r1", "r2", "r3"}
+    # r1-r3 seen by r1 (wants it, -30) and r3 (mildly against, +5); r1-r2 by both, weak
+    res = [_fake("r1", ["air:r1-r3"], {"air:r1-r3": -30.0, "air:r1-r2": -6.0}),
+           _fake("r2", [], {"air:r1-r2": -6.0}),
+           _fake("r3", [], {"air:r1-r3": 5.0})]
+    res = [next(r for r in res if r.zone == p.zone) for p in probs]
+    kept = {rule: {v.name for v in combine(probs, res, rule, margin=10.0) if v.kept}
+            for rule in ("sum", "both", "either")}
+    assert kept["sum"] == {"air:r1-r3", "air:r1-r2"}       # -25 and -12 < -10
+    assert kept["both"] == set()
+    assert kept["either"] == {"air:r1-r3"}
+    v = next(v for v in combine(probs, res, "sum") if v.name == "air:r1-r3")
+    assert v.rbar_v == pytest.approx(3e-4) and "r3: out (+5.0)" in v.reason
+    with pytest.raises(EstimationError, match="combine rule"):
+        combine(probs, res, "majority")
+
+
+def test_runners_agree_bit_for_bit(corridor):
+    """Serial, two processes and a Dask LocalCluster give the same local results."""
+    distributed = pytest.importorskip("distributed")
+    spec, meas, _ = corridor
+    probs = local_problems(spec, meas.frame.columns)[:2]
+    # a margin no edge can meet: start fit, one screen, one refit, final fit per problem
+    kw = dict(max_iter=40, margin=1e6)
+    serial = run_local(probs, meas.frame, workers=1, **kw)
+    procs = run_local(probs, meas.frame, workers=2, **kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      dashboard_address=None) as cluster, \
+                distributed.Client(cluster) as client:
+            dask = run_local(probs, meas.frame, client=client, **kw)
+    for a, b, c in zip(serial, procs, dask):
+        assert a.error is None, a.error
+        assert a.zone == b.zone == c.zone
+        assert a.edges == b.edges == c.edges
+        assert a.evidence == b.evidence == c.evidence
+        assert a.rbar_v == b.rbar_v == c.rbar_v
+        assert (math.isnan(a.tau0) and math.isnan(c.tau0)) or a.tau0 == c.tau0
+
+
+def test_fit_local_failure_is_reported_not_raised(corridor):
+    spec, meas, _ = corridor
+    p = local_problems(spec, meas.frame.columns)[0]
+    broken = LocalProblem(p.zone, p.spec, p.candidates, p.columns, p.aggregates)
+    frame = meas.frame.drop(columns=[f"T:{p.spec.boundary[0]}"])
+    [res] = run_local([broken], frame, workers=1)
+    assert res.error and p.spec.boundary[0] in res.error
+    verdicts = combine([broken], [res])
+    assert all(not v.kept and v.reason.startswith("undecided") for v in verdicts)
