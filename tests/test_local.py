@@ -142,3 +142,21 @@ def test_fit_local_failure_is_reported_not_raised(corridor):
     assert res.error and p.spec.boundary[0] in res.error
     verdicts = combine([broken], [res])
     assert all(not v.kept and v.reason.startswith("undecided") for v in verdicts)
+
+
+def test_short_calibration_is_never_called_identified(tmp_path):
+    """Two days of data (1 calibration day): the interval verdicts say 'not identified'."""
+    from thermctl.identify import IdentifyOptions, identify
+    from thermctl.spec import load_spec
+    generate("pugh-hall", days=2, seed=4).write(tmp_path)
+    spec = load_spec(tmp_path / "building.yaml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meas = read_measurements(tmp_path / "data.csv", spec)
+        ident = identify(meas, IdentifyOptions(candidates="all", intervals="wald", scale="global"))
+    if ident.intervals is None:
+        pytest.skip("no air path kept on these 2 days: nothing to call identified")
+    assert all("not identified" in v for v in ident.intervals.verdicts.values())
+    assert any("calibration day" in n for n in ident.notes)
+    meta = ident.model.meta["greybox"]["intervals"]
+    assert not any(v["identifiable"] for v in meta.values())

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from thermctl.validate import verdict
 from thermctl.errors import DataError
 from thermctl.identify import Identification, IdentifyOptions
 from thermctl.outputs import (check_consistent, check_outdir, staged_output, validation_document,
@@ -27,7 +28,7 @@ def _vr(zones=("z1",)):
     return SimpleNamespace(open_loop={"identified": ol, "conduction-only": ol}, step_errors={},
                            step_responses={}, horizons_h=(1.0, 6.0, 24.0), kstep={}, units="K",
                            window=("2011-02-01", "2011-02-03"), zones=list(zones),
-                           to_data_units=lambda v: v)
+                           to_data_units=lambda v: v, verdict=verdict(0.0, {}))
 
 
 def _copy(model):

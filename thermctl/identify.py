@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from . import __version__
-from .data import Measurements
+from .data import MIN_CALIBRATION_DAYS, Measurements
 from .errors import BoundWarning, DataError, EstimationError
 from .model import ThermalModel
 from .network import ThermalNetwork
@@ -350,7 +350,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
             notes.append("the data support no convection edge: the model is conduction-only")
         else:
             gb = sel.estimator
-            ida = _intervals(gb, opt, notes)
+            ida = _intervals(gb, opt, notes, cal)
             _misfit_note(ida, opt, notes)
     if gb is not None:
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
@@ -428,18 +428,30 @@ def _greybox_fit(net, cal, opt, notes, init=None):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         gb = GreyboxEstimator(net, criterion=opt.criterion, solar=opt.solar).fit(cal, init=init)
-    return gb, _intervals(gb, opt, notes)
+    return gb, _intervals(gb, opt, notes, cal)
 
 
-def _intervals(gb, opt, notes):
+def _intervals(gb, opt, notes, cal=None):
     if opt.intervals == "none" or gb.criterion != "likelihood":
         return None
     from .greybox import identifiability
     try:
-        return identifiability(gb, params=("rbar_v", "tau0"), method=opt.intervals)
+        ida = identifiability(gb, params=("rbar_v", "tau0"), method=opt.intervals)
     except (EstimationError, np.linalg.LinAlgError) as exc:
         notes.append(f"no intervals: {exc}")
         return None
+    days = None if cal is None else (cal.end - cal.start + cal.step).total_seconds() / 86400.0
+    if days is not None and days < MIN_CALIBRATION_DAYS:
+        # an interval from one or two days measures that stretch of weather and occupancy,
+        # not the building: no parameter is called identified from it
+        for k in list(ida.verdicts):
+            ida.verdicts[k] = (f"{k}: not identified — {days:.1f} calibration day(s), fewer than "
+                               f"{MIN_CALIBRATION_DAYS:g}; its interval describes those days only")
+        ida.short_calibration_days = days
+        notes.append(f"only {days:.1f} calibration day(s): no parameter is called identified "
+                     f"(at least {MIN_CALIBRATION_DAYS:g} are needed; more days or "
+                     "--calibration with a longer window)")
+    return ida
 
 
 def _misfit_note(ida, opt, notes):
@@ -464,7 +476,8 @@ def _greybox_meta(gb, ida) -> dict:
     if ida is not None:
         out["intervals"] = {k: {"value": iv.value, "lower": iv.lower, "upper": iv.upper,
                                 "level": iv.level, "method": iv.method, "unit": iv.unit,
-                                "identifiable": iv.identifiable}
+                                "identifiable": iv.identifiable and not getattr(
+                                    ida, "short_calibration_days", None)}
                             for k, iv in ida.intervals.items()
                             if k.startswith(("rbar_v", "tau0"))}
         out["verdicts"] = dict(ida.verdicts)

@@ -299,7 +299,8 @@ class LocalResult:
 
 
 def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: float = 10.0,
-              solar: bool = True, fit_rows: str = "all", max_iter: int = 200) -> LocalResult:
+              solar: bool = True, fit_rows: str = "auto", max_iter: int = 200,
+              **options) -> LocalResult:
     """Select and fit the air paths of one local problem.
 
     Forward selection from no air path, then backward elimination (BIC on the local
@@ -315,14 +316,13 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
         Criterion improvement an edge must bring [-].
     solar : bool
         Solar apertures on ``solar:`` columns.
-    fit_rows : {"all", "auto", "supply_off"}
-        Samples whose innovations count (:class:`thermctl.greybox.GreyboxOptions`). Default
-        ``all``: a local problem has the supply flows of its own zones as inputs, and on the
-        25-zone corridor testbed the supply-off nights alone (1656 of 2808 samples) left the
-        true air path f1n02–f1s02 worse than none (BIC +8, R̄_v 3.8× the truth), all samples
-        found it (BIC −123, R̄_v 3.0e-4 against 3.36e-4).
+    fit_rows : {"auto", "all", "supply_off"}
+        Samples whose innovations count (:class:`thermctl.greybox.GreyboxOptions`); the
+        whole-building default, so that local and whole-building fits see the same rows.
     max_iter : int
         Per fit.
+    **options
+        Other :class:`thermctl.greybox.GreyboxOptions` fields (``basis``, ``harmonics``...).
 
     Returns
     -------
@@ -342,7 +342,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
         sel = select_edges(problem.spec, sub, candidates=list(problem.candidates),
                            criterion=criterion, direction="both", margin=margin,
                            final_per_edge=True, max_iter=max_iter, solar=solar,
-                           fit_rows=fit_rows)
+                           fit_rows=fit_rows, **options)
     evidence = {}
     for st in sel.path:
         if st.action in ("add", "stop"):

@@ -23,12 +23,13 @@ import numpy as np
 from .errors import DataError
 from .io import model_to_dict, save_model
 from .model import ThermalModel
+from .validate import support_note
 
 if TYPE_CHECKING:  # only for annotations: keeps `import thermctl.outputs` light for the CLI
     from .identify import Identification
 
 __all__ = ["staged_output", "write_outputs", "identification_document", "validation_document",
-           "support_note", "check_outdir", "check_consistent", "new_run_id"]
+           "check_outdir", "check_consistent", "new_run_id"]
 
 
 # What thermctl writes into an output directory. The run outputs belong to one
@@ -494,6 +495,8 @@ def validation_document(vr, model: ThermalModel | None = None) -> dict:
                    "content": support_note(vr)})
     return {"format": "thermctl-validation", "version": 1,
             "identification_run_id": None if model is None else model.meta.get("run_id"),
+            # the verdict weighs every horizon; its per-horizon numbers travel with it
+            "verdict": vr.verdict.to_dict(),
             "window": list(vr.window),
             "units": vr.units, "open_loop": rows,
             "rmse_mean": {k: conv(r.rmse_mean) for k, r in vr.open_loop.items()},
@@ -507,31 +510,3 @@ def validation_document(vr, model: ThermalModel | None = None) -> dict:
             "report": blocks}
 
 
-def support_note(vr) -> str:
-    """Which of the three measures separates the models on these data, in words."""
-    out = []
-    ol = {k: r.rmse_mean for k, r in vr.open_loop.items()}
-    if "identified" in ol and "conduction-only" in ol:
-        gain = 1.0 - ol["identified"] / ol["conduction-only"]
-        out.append(f"48-h open loop: the identified model is {100 * gain:+.0f} % better than "
-                   "conduction-only" + (" — within what unmeasured gains and the unknown initial "
-                                        "wall states move, so this measure cannot tell the "
-                                        "models apart here" if abs(gain) < 0.05 else "") + ".")
-    if "identified" in vr.kstep and "conduction-only" in vr.kstep:
-        a, b = vr.kstep["identified"].rmse_mean, vr.kstep["conduction-only"].rmse_mean
-        rel = 1.0 - a / b
-        parts = ", ".join(f"{h / 3600:g} h {100 * r:+.0f} %" for h, r in zip(vr.kstep["identified"].horizons, rel))
-        out.append(f"k-step ahead from filtered states (identified vs conduction-only): {parts}"
-                   + (" — the data support the air paths at the horizons an MPC uses."
-                      if np.nanmax(rel) > 0.05 else
-                      " — no clear difference: on these data the air paths matter little "
-                      "for prediction, or the gains hide them."))
-    if vr.step_errors:
-        e = vr.step_errors
-        out.append(f"step responses vs the truth at 6 h: identified {100 * e['identified'][1]:.0f} %, "
-                   f"conduction-only {100 * e['conduction-only'][1]:.0f} % — what a controller acts "
-                   "through; only testbed data have a truth to compare with.")
-    else:
-        out.append("step responses: no truth to compare with on measured data; the figure shows "
-                   "how far the identified couplings move heat between zones.")
-    return " ".join(out)

@@ -238,7 +238,6 @@ def validate(
         cb(stage, 1, 1)
     outdir = out or model_path.parent
     doc = validation_document(vr, model)
-    _with_verdict(doc, vr)
     with staged_output(outdir) as tmp:
         (tmp / "validation.json").write_text(json.dumps(doc, indent=2))
         from ..plots.validate import plot_open_loop, plot_step_responses
@@ -251,20 +250,6 @@ def validate(
     _print_validation(vr)
     console.print(f"wrote {Path(outdir) / 'validation.json'}")
     return vr
-
-
-def _with_verdict(doc: dict, vr) -> dict:
-    """The verdict (:attr:`ValidationReport.verdict`) into validation.json and its report note.
-
-    The note weighs every horizon (issue 22: a model worse at 1-6 h was called supported
-    because it won at 24 h); ``doc["verdict"]`` holds the per-horizon numbers behind it.
-    """
-    from ..validate import support_note
-    doc["verdict"] = vr.verdict.to_dict()
-    for block in doc.get("report", []):
-        if block.get("kind") == "note" and block.get("title") == "What the data can support":
-            block["content"] = support_note(vr)
-    return doc
 
 
 def _saved_window(model, key):
