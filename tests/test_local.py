@@ -160,3 +160,40 @@ def test_short_calibration_is_never_called_identified(tmp_path):
     assert any("calibration day" in n for n in ident.notes)
     meta = ident.model.meta["greybox"]["intervals"]
     assert not any(v["identifiable"] for v in meta.values())
+
+
+def test_identify_many_matches_one_by_one(tmp_path):
+    """A portfolio run gives each building what identify gives it alone."""
+    from thermctl.identify import IdentifyOptions, identify, identify_many
+    from thermctl.spec import load_spec
+    generate("corridor", zones=5, days=3, seed=5).write(tmp_path)
+    spec = load_spec(tmp_path / "building.yaml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meas = read_measurements(tmp_path / "data.csv", spec)
+    two = meas.window(end=meas.start + 2 * (meas.end - meas.start) / 3)
+    opt = IdentifyOptions(scale="local", workers=1, margin=1e6, intervals="none")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        many = identify_many([meas, two], opt)
+        alone = [identify(m, opt) for m in (meas, two)]
+    for a, b in zip(many, alone):
+        assert a.local is not None and len(a.local.problems) == len(spec.measured_zones)
+        assert [r.evidence for r in a.local.results] == [r.evidence for r in b.local.results]
+        assert a.model.network.convection_pairs == b.model.network.convection_pairs
+
+
+@pytest.mark.slow
+def test_cli_identify_many_writes_one_folder_per_building(tmp_path):
+    from typer.testing import CliRunner
+    from thermctl.cli import app
+    for name, seed in (("a", 1), ("b", 2)):
+        generate("corridor", zones=5, days=4, seed=seed).write(tmp_path / "in" / name)
+    (tmp_path / "in" / "notes").mkdir()
+    res = CliRunner().invoke(app, ["identify-many", str(tmp_path / "in"), "--out",
+                                   str(tmp_path / "out"), "--scale", "local", "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    assert "skipped" in res.output and "notes" in res.output
+    for name in ("a", "b"):
+        assert (tmp_path / "out" / name / "model.json").is_file()
+        assert (tmp_path / "out" / name / "identification.json").is_file()

@@ -20,7 +20,7 @@ from .model import ThermalModel
 from .network import ThermalNetwork
 from .structure import StructureIdentifier
 
-__all__ = ["IdentifyOptions", "Identification", "identify"]
+__all__ = ["IdentifyOptions", "Identification", "identify", "identify_many"]
 
 logger = logging.getLogger(__name__)
 
@@ -329,12 +329,14 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
                      "is conduction-only")
         net = net0
     else:
-        n_done = [0]
-
         def say(msg):
-            n_done[0] += 1
+            logger.info("selection: %s", msg)
+
+        def on_fit(n):
+            # the number of fits is not known in advance (it depends on what the data keep):
+            # report the count, with the candidates as a scale in the stage name
             if progress:
-                progress("selection", min(n_done[0], len(cands)), len(cands))
+                progress(f"selection fits ({len(cands)} candidates)", n, None)
 
         # from SIN's few picks: backward; from every pair: forward (cheaper and what
         # model-based selection does for small buildings)
@@ -343,6 +345,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
             warnings.simplefilter("ignore", BoundWarning)
             sel = select_edges(spec, cal, candidates=cands, criterion=opt.selection_criterion,
                                direction=direction, margin=opt.margin, progress=say,
+                               on_fit=on_fit,
                                start=start or (),
                                final_criterion=opt.criterion, solar=opt.solar)
         net = ThermalNetwork(spec, sel.edges)
@@ -373,11 +376,16 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     (small buildings) or the local per-edge R̄_v (large ones)."""
     from .local import identify_local
 
-    spec = meas.spec
-    notes = []
-    li = identify_local(spec, cal.frame, rule=opt.combine, criterion=opt.selection_criterion,
+    li = identify_local(meas.spec, cal.frame, rule=opt.combine, criterion=opt.selection_criterion,
                         margin=opt.margin, solar=opt.solar, workers=opt.workers,
                         client=client or opt.scheduler, progress=progress)
+    return _finish_local(meas, cal, val, opt, li, progress)
+
+
+def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
+    """The model of combined local results: whole-building refit when small enough."""
+    spec = meas.spec
+    notes = []
     logger.info("%s", li.summary())
     failed = [r for r in li.results if r.error]
     if failed:
@@ -420,6 +428,77 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
         model = li.model(spec, meta=meta)
     return Identification(model, None, None, None, cal, val, opt, notes, selection=None,
                           greybox=gb, intervals=ida, local=li)
+
+
+def identify_many(items, options: IdentifyOptions | None = None, progress=None,
+                  client=None) -> list[Identification]:
+    """Identify a portfolio of buildings as one set of tasks.
+
+    The local problems of every building identified locally (``options.is_local``) go to
+    the workers together, so a cluster stays busy across buildings; buildings small enough
+    for the whole-building method are identified one after the other here (or as one task
+    each on ``client``).
+
+    Parameters
+    ----------
+    items : list of Measurements
+        One per building (each with its spec).
+    options : IdentifyOptions, optional
+        The same for every building.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+    client : distributed.Client or str, optional
+        Dask client or scheduler address (default: ``options.scheduler``, else local
+        processes).
+
+    Returns
+    -------
+    list of Identification
+        In the order of ``items``.
+    """
+    import time as _time
+
+    from .local import assemble, local_problems, run_local
+
+    opt = options or IdentifyOptions()
+    opt.check()
+    client = client or opt.scheduler
+    own = False
+    if isinstance(client, str):
+        from distributed import Client
+        client, own = Client(client), True
+    try:
+        splits = [m.split(calibration=opt.calibration, validation=opt.validation) for m in items]
+        local = [k for k, m in enumerate(items) if opt.is_local(m.spec)]
+        whole = [k for k in range(len(items)) if k not in local]
+        futures = {}
+        if client is not None:
+            futures = {k: client.submit(identify, items[k], opt, pure=False) for k in whole}
+        problems, frames, owner = [], [], []
+        for k in local:
+            cal = splits[k][0]
+            ps = local_problems(items[k].spec, cal.frame.columns)
+            problems += ps
+            frames += [cal.frame] * len(ps)
+            owner += [k] * len(ps)
+        t0 = _time.perf_counter()
+        results = run_local(problems, frames, workers=opt.workers, client=client,
+                            progress=progress, criterion=opt.selection_criterion,
+                            margin=opt.margin, solar=opt.solar) if problems else []
+        wall = _time.perf_counter() - t0
+        out = {}
+        for k in local:
+            idx = [i for i, o in enumerate(owner) if o == k]
+            li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.combine,
+                          opt.margin, wall)
+            cal, val = splits[k]
+            out[k] = _finish_local(items[k], cal, val, opt, li, progress)
+        for k in whole:
+            out[k] = futures[k].result() if k in futures else identify(items[k], opt, progress)
+        return [out[k] for k in range(len(items))]
+    finally:
+        if own:
+            client.close()
 
 
 def _greybox_fit(net, cal, opt, notes, init=None):

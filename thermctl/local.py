@@ -38,6 +38,7 @@ import logging
 import math
 import os
 import time
+import uuid
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures import as_completed as cf_as_completed
@@ -50,7 +51,7 @@ from .network import ThermalNetwork
 from .spec import BuildingSpec, Distance, Zone
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
-           "fit_local", "run_local", "combine", "identify_local", "COMBINE_RULES"]
+           "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES"]
 
 log = logging.getLogger(__name__)
 
@@ -384,8 +385,9 @@ def run_local(problems, frame, *, workers: int | None = None, client=None, progr
     Parameters
     ----------
     problems : list of LocalProblem
-    frame : pandas.DataFrame
-        Calibration data (each task gets only its problem's columns).
+    frame : pandas.DataFrame or list of DataFrame
+        Calibration data (each task gets only its problem's columns); a list gives one
+        table per problem (problems of several buildings in one run).
     workers : int, optional
         Local processes; default: every core (``os.cpu_count()``); 1 runs in this process.
         Ignored with ``client``.
@@ -402,12 +404,15 @@ def run_local(problems, frame, *, workers: int | None = None, client=None, progr
         In the order of ``problems`` (the same whatever ran them).
     """
     n = len(problems)
+    frames = list(frame) if isinstance(frame, (list, tuple)) else [frame] * n
+    if len(frames) != n:
+        raise EstimationError(f"run_local: {len(frames)} tables for {n} problems")
     say = progress or (lambda *a: None)
-    results: dict[str, LocalResult] = {}
+    results: dict[int, LocalResult] = {}
     t0 = time.perf_counter()
 
-    def done(res):
-        results[res.zone] = res
+    def done(i, res):
+        results[i] = res
         k = len(results)
         eta = (time.perf_counter() - t0) / k * (n - k)
         log.info("local problem %d/%d: %s (%d states) %s in %.1f s; ETA %.0f s", k, n, res.zone,
@@ -415,6 +420,8 @@ def run_local(problems, frame, *, workers: int | None = None, client=None, progr
         say("local problems", k, n)
 
     say("local problems", 0, n)
+    # largest problems first: the last task to start is a short one
+    order = sorted(range(n), key=lambda i: -problems[i].n_states)
     if client is not None:
         own = False
         if isinstance(client, str):
@@ -422,28 +429,31 @@ def run_local(problems, frame, *, workers: int | None = None, client=None, progr
             client, own = Client(client), True
         try:
             from distributed import as_completed
-            futs = [client.submit(_fit_task, p, p.data(frame), kwargs, pure=False, key=f"thermctl-local-{p.zone}-{i}")
-                    for i, p in enumerate(problems)]
-            for fut in as_completed(futs):
-                done(fut.result())
+            # a key names a result on the cluster: unique per call, or a second run on the
+            # same client would be handed the first run's results
+            run = uuid.uuid4().hex[:8]
+            futs = {client.submit(_fit_task, problems[i], problems[i].data(frames[i]), kwargs,
+                                  pure=False, key=f"thermctl-local-{run}-{i}"): i
+                    for i in order}
+            for fut in as_completed(list(futs)):
+                done(futs[fut], fut.result())
         finally:
             if own:
                 client.close()
     else:
-        workers = os.cpu_count() or 1 if workers is None else int(workers)
+        workers = (os.cpu_count() or 1) if workers is None else int(workers)
         if workers < 1:
             raise EstimationError(f"workers must be >= 1, found {workers}")
         if workers == 1 or n == 1:
-            for p in problems:
-                done(_fit_task(p, p.data(frame), kwargs))
+            for i in range(n):
+                done(i, _fit_task(problems[i], problems[i].data(frames[i]), kwargs))
         else:
             with ProcessPoolExecutor(max_workers=min(workers, n)) as pool:
-                # largest problems first: the last task to start is a short one
-                order = sorted(problems, key=lambda p: -p.n_states)
-                futs = [pool.submit(_fit_task, p, p.data(frame), kwargs) for p in order]
+                futs = {pool.submit(_fit_task, problems[i], problems[i].data(frames[i]),
+                                    kwargs): i for i in order}
                 for fut in cf_as_completed(futs):
-                    done(fut.result())
-    return [results[p.zone] for p in problems]
+                    done(futs[fut], fut.result())
+    return [results[i] for i in range(n)]
 
 
 # ---------------------------------------------------------------------------- combine
@@ -637,10 +647,17 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "sum", criterion: s
     problems = local_problems(spec, frame.columns, parallel=parallel)
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
                         criterion=criterion, margin=margin, solar=solar)
+    return assemble(problems, results, rule, margin, time.perf_counter() - t0)
+
+
+def assemble(problems, results, rule: str = "sum", margin: float = 10.0,
+             wall: float = float("nan")) -> LocalIdentification:
+    """A :class:`LocalIdentification` from fitted local problems (:func:`combine` and the
+    combined parameters); ``wall`` is the wall time it took [s]."""
     verdicts = combine(problems, results, rule, margin)
     edges = [(v.a, v.b, v.d) for v in verdicts if v.kept]
     rb = {v.name: v.rbar_v for v in verdicts if v.kept}
     taus = [r.tau0 for r in results if math.isfinite(r.tau0)]
     tau0 = float(np.median(taus)) if taus else float("nan")
-    return LocalIdentification(problems, results, verdicts, edges, rb, tau0, rule,
-                               time.perf_counter() - t0, float(sum(r.cpu for r in results)))
+    return LocalIdentification(problems, results, verdicts, edges, rb, tau0, rule, wall,
+                               float(sum(r.cpu for r in results)))

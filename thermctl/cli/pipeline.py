@@ -150,6 +150,72 @@ def identify(
     return ident
 
 
+@app.command("identify-many")
+@handle_errors
+def identify_many(
+    buildings: Path = typer.Argument(..., metavar="BUILDINGS_DIR", help="A folder with one "
+                                     "sub-folder per building, each holding building.yaml "
+                                     "(or .json) and data.csv (or data.parquet)."),
+    out: Path = typer.Option(Path("thermctl-many"), "--out", "-o", help="Output folder: one "
+                             "sub-folder of outputs per building."),
+    units: str = typer.Option("si", help=UNITS_HELP),
+    scale: str = typer.Option(_IDENT_DEFAULTS.scale, help="global, local or auto (as identify)."),
+    workers: int = typer.Option(None, min=1, help="Local processes (default: every core)."),
+    scheduler: str = typer.Option(None, help="Dask scheduler address (tcp://HOST:8786): every "
+                                  "building's local problems go there as one set of tasks."),
+    combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="sum, both or either (as identify)."),
+):
+    """Identify many buildings with the default grey-box method, as one set of tasks.
+
+    Every building's local problems are sent to the workers together (all local cores, or
+    a Dask cluster with --scheduler), so many small buildings keep a cluster as busy as one
+    big one. Each building's outputs go to OUT/<folder name>/ as with `thermctl identify`.
+
+    Examples:
+      thermctl identify-many portfolio/ --out results/
+      thermctl identify-many portfolio/ --scheduler tcp://10.0.0.5:8786 --scale local
+    """
+    from ..identify import identify_many as run_many
+    from ..outputs import write_outputs
+
+    t0 = time.perf_counter()
+    if not buildings.is_dir():
+        raise DataError(f"{buildings}: not a folder (expected one sub-folder per building)")
+    found, skipped = [], []
+    for sub in sorted(p for p in buildings.iterdir() if p.is_dir()):
+        spec_path = next((sub / n for n in ("building.yaml", "building.yml", "building.json")
+                          if (sub / n).is_file()), None)
+        data_path = next((sub / n for n in ("data.csv", "data.parquet") if (sub / n).is_file()),
+                         None)
+        if spec_path is None or data_path is None:
+            skipped.append(sub.name)
+            continue
+        found.append((sub.name, spec_path, data_path))
+    if not found:
+        raise DataError(f"{buildings}: no sub-folder holds both building.yaml and data.csv")
+    if skipped:
+        console.print(f"skipped (no building.yaml + data.csv): {', '.join(skipped)}")
+    items = []
+    for name, spec_path, data_path in found:
+        meas = _read_data(data_path, load_spec(spec_path), units)
+        console.print(f"{name}: {meas.spec.name}, {len(meas.spec.zone_names)} zones, "
+                      f"{len(meas)} samples", highlight=False)
+        items.append(meas)
+    opt = IdentifyOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine)
+    with progress("identify-many") as bar:
+        idents = run_many(items, opt, progress=_progress_callback(bar))
+    t = Table("building", "zones", "air paths", "method", title="Identified")
+    for (name, _, _), ident in zip(found, idents):
+        write_outputs(ident, out / name)
+        t.add_row(name, str(len(ident.model.network.zones)),
+                  str(len(ident.model.network.convection_edges)),
+                  "local" if ident.local is not None else "whole building")
+    console.print(t)
+    console.print(f"wrote {len(idents)} identifications under {out} "
+                  f"({time.perf_counter() - t0:.1f} s)")
+    return idents
+
+
 def _window(text, what):
     if text is None:
         return None

@@ -203,6 +203,8 @@ class _Searcher:
         else:
             self.train, self.test = data, None
 
+    on_fit = None        # called with the number of fits so far (progress of long searches)
+
     def fit(self, edges, init=None, fix=None, max_iter=None):
         net = ThermalNetwork(self.spec, [c.pair + (c.d,) for c in edges])
         est = GreyboxEstimator(net, per_edge=True, fix=fix, max_iter=max_iter or self.max_iter,
@@ -212,6 +214,8 @@ class _Searcher:
             warnings.simplefilter("ignore", ConvergenceWarning)
             est.fit(self.train, init=init)
         self.n_fits += 1
+        if self.on_fit is not None:
+            self.on_fit(self.n_fits)
         return est, self.value(est)
 
     def grid_screen(self, cur, rest, base, est):
@@ -289,7 +293,8 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
                  start=(), max_edges: int | None = None, holdout: float = 0.3,
                  final_per_edge: bool = False, final_criterion: str = "likelihood",
                  max_iter: int = 200, margin: float = 10.0,
-                 screen: str = "grid", progress=None, **estimator_kwargs) -> SelectionResult:
+                 screen: str = "grid", progress=None, on_fit=None,
+                 **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -338,6 +343,8 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
         and a 1-D fit per candidate, ~5–10× slower).
     progress : callable, optional
         ``progress(message)`` after each decision.
+    on_fit : callable, optional
+        ``on_fit(n)`` after each full fit (``n`` fits so far): a heartbeat for long searches.
     **estimator_kwargs
         Passed to every :class:`GreyboxEstimator` (model options, solver...).
 
@@ -359,6 +366,7 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
     cands = _candidates(spec, candidates)
     by_name = {c.name: c for c in cands}
     S = _Searcher(spec, data, criterion, holdout, estimator_kwargs, max_iter)
+    S.on_fit = on_fit
     cur = [by_name[_name(e)] if _name(e) in by_name else _cand(spec, e) for e in start]
     if direction == "backward":
         cur = list(cands)
