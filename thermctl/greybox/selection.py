@@ -464,14 +464,20 @@ def select_edges(spec, data, *, candidates="all", criterion: str = "bic", direct
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])
     final_kw = dict(estimator_kwargs)
     final_kw.pop("per_edge", None)
-    final = GreyboxEstimator(net, final_criterion, per_edge=final_per_edge, max_iter=max_iter,
-                             **final_kw)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", BoundWarning)
-        final.fit(data, init={k: v for k, v in est.params_.items() if not k.startswith("rbar_v[")}
-                  | ({"rbar_v": float(np.exp(np.mean(np.log(list(per_edge.values())))))}
-                     if per_edge else {}))
-    S.n_fits += 1
+    if final_per_edge and final_criterion == "likelihood" and criterion != "holdout":
+        # the search's last fit is this very model (per edge, likelihood, all the data):
+        # refitting it would cost one more fit for the same optimum
+        final = est
+    else:
+        final = GreyboxEstimator(net, final_criterion, per_edge=final_per_edge,
+                                 max_iter=max_iter, **final_kw)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            final.fit(data, init={k: v for k, v in est.params_.items()
+                                  if not k.startswith("rbar_v[")}
+                      | ({"rbar_v": float(np.exp(np.mean(np.log(list(per_edge.values())))))}
+                         if per_edge else {}))
+        S.n_fits += 1
     return SelectionResult([x.pair + (x.d,) for x in cur], cands, path, reasons, criterion, final,
                            per_edge, time.perf_counter() - t0, S.n_fits)
 
