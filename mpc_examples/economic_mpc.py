@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from thermctl._step import radau_residual
 from thermctl.model import ThermalModel
 
 from .common import Forecast, HVACModel, MPCSolution, RecedingHorizonMPC
@@ -247,8 +248,7 @@ class EconomicMPC(RecedingHorizonMPC):
         b = f(ca.DM.zeros(nx), u)
         Au = lambda v: f(v, u) - b  # noqa: E731  (f is affine in x: A_u v = f(v) − f(0))
         h = self.dt / self.s
-        r = (xb - (2 * h / 3) * Au(xb) + (h * h / 6) * Au(Au(xb))
-             - xa - (h / 3) * Au(xa) - h * (b - (h / 6) * Au(b)))
+        r = radau_residual(Au, xa, xb, b, h)
         return ca.Function("G", [xa, xb, u], [r], ["xa", "xb", "u"], ["residual"])
 
     # ---- solve -------------------------------------------------------------

@@ -32,6 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._blas import single_thread_blas
+from ._step import radau_casadi_step, radau_stepper
 from .errors import ModelError
 from .network import ThermalNetwork
 
@@ -41,8 +42,6 @@ RBAR_V_PAPER = 3.36e-4
 """Convection resistance per unit distance identified by Goyal et al. [K/(W m)]."""
 C_V_PAPER = 1.19e3
 """Convection capacitance identified by Goyal et al. [J/K]."""
-
-_DENSE_LIMIT = 400  # above this many states, sparse LU beats dense linear algebra
 
 
 def zoh(A, dt: float):
@@ -190,14 +189,7 @@ class _Symbolic:
         a_sup = ms * self.kz
         A_u = A - ca.mtimes(sel, ca.mtimes(ca.diag(a_sup), sel.T))
         b_u = ca.mtimes(Bt, Tb) + ca.mtimes(sel, a_sup * Ts + Q * self.inv_cz)
-        h = dt / substeps
-        I = ca.DM.eye(nx)
-        D = I - (2.0 / 3.0) * h * A_u + (h * h / 6.0) * ca.mtimes(A_u, A_u)
-        N = I + (h / 3.0) * A_u
-        c = h * (b_u - (h / 6.0) * ca.mtimes(A_u, b_u))
-        xk = x
-        for _ in range(substeps):
-            xk = ca.solve(D, ca.mtimes(N, xk) + c)
+        xk = radau_casadi_step(A_u, b_u, x, dt / substeps, substeps)
         F = ca.Function(f"F{substeps}", [x, u, p, dt], [xk], ["x", "u", "p", "dt"], ["x_next"])
         self._F[substeps] = F
         return F
@@ -554,28 +546,4 @@ def make_stepper(A_u, dt: float, method: str = "exact", substeps: int = 1):
         return lambda x, b: Phi @ x + Gamma @ b
     if method != "radau":
         raise ModelError(f"method must be 'exact' or 'radau', found {method!r}")
-    return _radau_stepper(sp.csc_matrix(A_u), dt, substeps)
-
-
-def _radau_stepper(A_u, dt, substeps):
-    # Radau IIA = Padé(1,2) of exp: x+ = D^{-1}[(I + hA/3) x + h(I - hA/6) b],
-    # D = I - 2hA/3 + h²A²/6. L-stable, keeps the steady state exactly.
-    h = dt / substeps
-    n = A_u.shape[0]
-    I = sp.identity(n, format="csc")
-    D = sp.csc_matrix(I - (2 * h / 3) * A_u + (h * h / 6) * (A_u @ A_u))
-    N = sp.csr_matrix(I + (h / 3) * A_u)
-    A_csr = sp.csr_matrix(A_u)
-    if n > _DENSE_LIMIT:
-        solve = spla.splu(D).solve
-    else:
-        lu = sla.lu_factor(D.toarray())
-        solve = lambda r: sla.lu_solve(lu, r)  # noqa: E731
-
-    def step(x, b):
-        c = h * (b - (h / 6) * (A_csr @ b))
-        for _ in range(substeps):
-            x = solve(N @ x + c)
-        return x
-
-    return step
+    return radau_stepper(A_u, dt, substeps)

@@ -9,8 +9,8 @@ every sub-step with consensus constraints, which keeps the KKT matrix banded in 
 the free initial deviation ``delta`` (``initial_state="estimate"``) and the state after
 every sub-step. Each data step of length ``dt`` is cut into ``s`` sub-steps of
 ``h = dt/s``, and consecutive states are tied by the implicit form of the model's own
-L-stable Radau IIA step (:meth:`thermctl.model.CasadiModel.F`, Padé (1,2) of the
-exponential):
+L-stable Radau IIA step (:func:`thermctl._step.radau_residual`; its explicit form is
+:meth:`thermctl.model.CasadiModel.F`), Padé (1,2) of the exponential:
 
 .. math::
 
@@ -41,6 +41,7 @@ import math
 import casadi as ca
 import numpy as np
 
+from .._step import radau_residual
 from ..errors import EstimationError
 from ..model import make_stepper
 
@@ -270,9 +271,7 @@ class CasadiMultipleShootingNLP:
             return ca.vertcat(out[:nz] - a_sup * v[:nz], out[nz:])
 
         b = ca.mtimes(Bt, Tb) + ca.vertcat(a_sup * Ts + Q * ca.DM(sym.inv_cz), ca.SX(n - nz, 1))
-        Axn = Au(xn)
-        res = (xn - (2 * h / 3) * Axn + (h * h / 6) * Au(Axn)
-               - x - (h / 3) * Au(x) - h * b + (h * h / 6) * Au(b))
+        res = radau_residual(Au, x, xn, b, h)
         return ca.Function("radau_residual", [x, xn, u, eta], [res],
                            ["x", "x_next", "u", "eta"], ["residual"])
 

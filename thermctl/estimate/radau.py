@@ -3,8 +3,7 @@ r"""Sparse Radau IIA simulation of the cost window, with sensitivities: for larg
 The exact step of :mod:`.sim` costs one dense eigendecomposition per distinct supply
 flow: fine for tens of states, too much for hundreds when the VAV flows change every
 step. This simulator takes the model's own L-stable Radau IIA step (Padé (1,2) of the
-exponential, the formula of :meth:`thermctl.model.CasadiModel.F`) with ``s`` sub-steps
-of ``h = dt/s``,
+exponential, written once in :mod:`thermctl._step`) with ``s`` sub-steps of ``h = dt/s``,
 
 .. math::
 
@@ -12,7 +11,8 @@ of ``h = dt/s``,
     N = I + \tfrac{h}{3}A_u,\; c = h\big(b - \tfrac{h}{6}A_u b\big),
 
 with one sparse LU of ``D`` per distinct flow (shared by the sub-steps of a sample), and
-forward sensitivities from the same LU. For a parameter direction ``E = ∂A_u/∂η``:
+forward sensitivities from the same LU. For a parameter direction ``E = ∂A_u/∂η``
+(:func:`thermctl._step.radau_tangent`):
 
 .. math::
 
@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .._step import radau_d_matrix, radau_forcing, radau_n, radau_tangent
 from ..errors import EstimationError
 from .sim import Simulator
 
@@ -69,13 +70,12 @@ class RadauFactors:
             return item
         sim, h, c = self.sim, self.sim.h, self.c
         A_u = sp.csr_matrix(self.A - sp.diags(sim.supply[j]))
-        n = A_u.shape[0]
         # D = C^-½ D_s C^½ with D_s = I − (2h/3) S + (h²/6) S², S = C^½ A_u C^-½ symmetric
         # and ≤ 0, so D_s is symmetric positive definite: factor it with a symmetric
         # ordering and no pivoting (stable, and a third less fill than COLAMD on D)
         S = sp.diags(c) @ A_u @ sp.diags(1.0 / c)
         S = 0.5 * (S + S.T)
-        Ds = sp.csc_matrix(sp.identity(n) - (2 * h / 3) * S + (h * h / 6) * (S @ S))
+        Ds = radau_d_matrix(S, h)
         try:
             lu = spla.splu(Ds, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                            options={"SymmetricMode": True})
@@ -126,11 +126,12 @@ class RadauSimulator(Simulator):
         for k in range(k0, k1):
             A_u, solve = fac.get(self.inverse[k])
             b = self.b[k]
-            c = h * (b - (h / 6) * (A_u @ b))
+            Av = A_u.__matmul__
+            c = radau_forcing(Av, b, h)
             if ne:
                 Eb = (fac.E @ b).reshape(ne, n).T                    # (n, ne)
             for _ in range(self.substeps):
-                R = X + (h / 3) * (A_u @ X)
+                R = radau_n(Av, X, h)
                 R[:, 0] += c
                 x = X[:, 0]
                 Xn = solve(R)
@@ -139,8 +140,7 @@ class RadauSimulator(Simulator):
                     Axn = A_u @ xn
                     EV = (fac.E @ np.column_stack([x, xn, Axn])).reshape(ne, n, 3)
                     Exn = EV[:, :, 1].T                              # (n, ne)
-                    extra = ((h / 3) * EV[:, :, 0].T + (2 * h / 3) * Exn
-                             - (h * h / 6) * (EV[:, :, 2].T + A_u @ Exn + Eb))
+                    extra = radau_tangent(EV[:, :, 0].T, Exn, EV[:, :, 2].T, A_u @ Exn, Eb, h)
                     Xn[:, 1:1 + ne] += solve(extra)
                 X = Xn
             if record is not None and k + 1 in record:

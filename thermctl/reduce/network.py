@@ -23,6 +23,7 @@ import control as ct
 import numpy as np
 import scipy.sparse as sp
 
+from .._step import radau_casadi_step
 from ..errors import ModelError
 from ..model import OperatingPoint, make_stepper, zoh
 from ..network import ThermalNetwork
@@ -273,14 +274,7 @@ class ReducedNetwork:
         A_u = A0 - ca.mtimes(sel, ca.mtimes(ca.diag(a_sup), sel.T))
         b_u = ca.mtimes(Bt, Tb) + ca.mtimes(sel, a_sup * Ts + Q * inv_c[:nz])
         f = ca.Function("f", [x, u], [ca.mtimes(A_u, x) + b_u], ["x", "u"], ["xdot"])
-        h = dt / substeps
-        I = ca.DM.eye(r)
-        Dm = I - (2.0 / 3.0) * h * A_u + (h * h / 6.0) * ca.mtimes(A_u, A_u)
-        N = I + (h / 3.0) * A_u
-        c = h * (b_u - (h / 6.0) * ca.mtimes(A_u, b_u))
-        xk = x
-        for _ in range(substeps):
-            xk = ca.solve(Dm, ca.mtimes(N, xk) + c)
+        xk = radau_casadi_step(A_u, b_u, x, dt / substeps, substeps)
         F = ca.Function(f"F{substeps}", [x, u, dt], [xk], ["x", "u", "dt"], ["x_next"])
         return f, F
 
