@@ -31,7 +31,7 @@ from .errors import SpecError, SpecWarning
 
 __all__ = [
     "Zone", "Wall", "Distance", "BuildingSpec", "load_spec", "spec_from_dict",
-    "RHO_AIR", "cp_moist_air",
+    "RHO_AIR", "cp_moist_air", "OUTDOOR_NAMES", "is_outdoor",
 ]
 
 RHO_AIR = 1.2
@@ -44,6 +44,17 @@ W_S_DEFAULT = 0.0074
 def cp_moist_air(w_s: float = W_S_DEFAULT) -> float:
     """Specific heat of moist air, ``1006 + 1860·w_s`` [J/(kg K)]."""
     return 1006.0 + 1860.0 * w_s
+
+
+OUTDOOR_NAMES = ("outside", "outdoor", "outdoors", "ambient", "out", "exterior")
+"""Boundary node names (lower case) that mean the outdoor air; every other boundary node
+is an indoor neighbouring space. The testbed gives these nodes the weather; the grey-box
+model's ``boundary_noise="outdoor"`` puts its error on them."""
+
+
+def is_outdoor(name: str) -> bool:
+    """Whether boundary node ``name`` is the outdoor air (:data:`OUTDOOR_NAMES`, any case)."""
+    return name.lower() in OUTDOOR_NAMES
 
 
 _TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances"}

@@ -10,7 +10,6 @@ __all__ = ["GreyboxOptions", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
 
 T_MIN, T_MAX = 4.0, 20.0        # [s/m], the paper's range of convective time constants per metre
 RBAR_BOUNDS = (1e-6, 1e-2)      # [K/(W m)], the paper's search range
-_OUTDOOR = ("outside", "outdoor", "outdoors", "ambient", "out", "exterior")
 
 
 @dataclass(frozen=True)

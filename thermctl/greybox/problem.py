@@ -43,9 +43,10 @@ import scipy.sparse as sp
 from ..errors import DataError, EstimationError
 from ..model import RBAR_V_PAPER, ThermalModel
 from ..network import ThermalNetwork
+from ..spec import is_outdoor
 from . import kalman
 from .data import GreyboxData
-from .options import _OUTDOOR, RBAR_BOUNDS, T_MAX, T_MIN, GreyboxOptions
+from .options import RBAR_BOUNDS, T_MAX, T_MIN, GreyboxOptions
 from .params import Param, ParamLayout
 
 __all__ = ["GreyboxOptions", "GreyboxProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
@@ -173,7 +174,7 @@ class GreyboxProblem:
         if rule == "all":
             return list(range(len(bnd)))
         if rule == "outdoor":
-            return [j for j, b in enumerate(bnd) if b.lower() in _OUTDOOR]
+            return [j for j, b in enumerate(bnd) if is_outdoor(b)]
         bad = [b for b in rule if b not in bnd]
         if bad:
             raise EstimationError(f"boundary_noise: {bad} are not boundary nodes ({bnd})")

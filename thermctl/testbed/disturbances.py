@@ -26,13 +26,10 @@ import pandas as pd
 from scipy.signal import lfilter
 
 from ..errors import ModelError
+from ..spec import OUTDOOR_NAMES  # boundary nodes that get the weather
 
 __all__ = ["WeatherSettings", "OccupancySettings", "Disturbances", "make_disturbances",
            "occupied_mode", "OUTDOOR_NAMES"]
-
-OUTDOOR_NAMES = ("outside", "outdoor", "outdoors", "ambient")
-"""Boundary nodes with these names get the weather; every other boundary node is an
-indoor neighbouring space."""
 
 
 @dataclass(frozen=True)
