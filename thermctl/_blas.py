@@ -3,7 +3,10 @@
 The matrices here are small (tens to a few hundred states): BLAS threads only fight
 each other and other processes. Measured on the 2-core CI machine under load, 150
 exact steps of a 55-state model took 38.9 s with threaded OpenBLAS and 0.54 s with
-one thread.
+one thread, and one 61×61 LU solve of the grey-box filter 20 ms against 0.3 ms.
+
+This is the only such helper: model, estimate, greybox and testbed all call
+:func:`single_thread_blas`.
 """
 
 from __future__ import annotations

@@ -8,12 +8,12 @@ import warnings
 
 import numpy as np
 
+from .._blas import single_thread_blas
 from ..errors import BoundWarning, ConvergenceWarning, EstimationError
 from ..model import ThermalModel
 from .identifiability import identifiability_report
 from .problem import RBAR_BOUNDS, T_MAX, T_MIN, CostProblem, EstimationData
 from .result import EstimationResult
-from .sim import _single_threaded_blas
 
 __all__ = ["fit", "ConvectionEstimator", "METHODS"]
 
@@ -99,7 +99,7 @@ def fit(problem: CostProblem, method: str = "multiple_shooting", *, theta0=None,
     """
     if method not in METHODS:
         raise EstimationError(f"method must be one of {METHODS}, found {method!r}")
-    with _single_threaded_blas():
+    with single_thread_blas():
         return _fit(problem, method, theta0, warm_start, interval, substeps, ipopt_options,
                     identifiability, raise_on_failure, progress)
 

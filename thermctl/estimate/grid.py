@@ -9,9 +9,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .._blas import single_thread_blas
 from ..errors import BoundWarning, EstimationError
 from .result import GridResult
-from .sim import ExactSimulator, _single_threaded_blas
+from .sim import ExactSimulator
 
 __all__ = ["grid_search"]
 
@@ -88,7 +89,7 @@ def grid_search(problem, n_rbar: int = 41, n_tau: int = 9, *, rbar_range=None, t
     # CasADi evaluations (matrix assembly) stay in this thread; the workers only do numpy
     n_sim0 = sim.n_sim
     prepared = [sim.prepare(etas[s]) for s in pieces]
-    with _single_threaded_blas():
+    with single_thread_blas():
         _run(sim, etas, pieces, prepared, J, n_jobs, progress, G)
     J = J.reshape(n_tau, n_rbar)
     if not np.all(np.isfinite(J)):

@@ -31,9 +31,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .._blas import single_thread_blas
 from ..errors import EstimationError
 from .nlp import _RMS_SCALE, _ipopt_result, _ipopt_solver, _run_ipopt
-from .sim import _single_threaded_blas
 
 __all__ = ["MultipleShootingNLP", "DEFAULT_INTERVAL"]
 
@@ -275,7 +275,7 @@ class MultipleShootingNLP:
         eta = w[:ne]
         if not np.all(np.isfinite(w)):
             raise EstimationError("non-finite iterate in the multiple-shooting NLP")
-        with _single_threaded_blas():
+        with single_thread_blas():
             fac = sim.factors(eta, derivs=True)
             res = np.empty((self.NI - 1, n))
             d_eta = np.empty((self.NI - 1, n, ne))

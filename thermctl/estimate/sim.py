@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .._blas import single_thread_blas as _single_threaded_blas  # noqa: F401 (re-used by siblings)
+from .._blas import single_thread_blas
 from ..errors import EstimationError
 
 __all__ = ["Simulator", "ExactSimulator", "CostEval"]
@@ -195,7 +195,7 @@ class Simulator:
         X = np.empty((len(self.inverse) + 1, self.n))
         X[0] = x
         col = x[:, None].copy()
-        with _single_threaded_blas():
+        with single_thread_blas():
             for k in range(len(self.inverse)):
                 col = self.propagate(fac, col, k, k + 1)
                 X[k + 1] = col[:, 0]
@@ -222,7 +222,7 @@ class Simulator:
         out = np.empty((len(self.obs_steps), len(self.zone_index), X.shape[1]))
         record = {int(k): r for r, k in enumerate(self.obs_steps)}
         self.n_sim += 1
-        with _single_threaded_blas():
+        with single_thread_blas():
             self.propagate(fac, X, 0, len(self.inverse), record, out)
         Yhat = out[:, :, 0]
         dY = out[:, :, 1:1 + ne] if ne else None
@@ -237,7 +237,7 @@ class Simulator:
         gradient then follows from the envelope theorem, and the Gauss–Newton Hessian
         is the Schur complement that projects out the initial-state directions.
         """
-        with _single_threaded_blas():
+        with single_thread_blas():
             return self._cost(eta, grad)
 
     def _cost(self, eta, grad):
@@ -407,7 +407,7 @@ class ExactSimulator(Simulator):
         budget = _CACHE_BYTES // max(1, G * n * n * 8)
         cache = {}
         diag = np.arange(n)
-        with _single_threaded_blas():
+        with single_thread_blas():
             for k in range(len(self.inverse)):
                 j = self.inverse[k]
                 item = cache.get(j)
@@ -451,7 +451,7 @@ class ExactSimulator(Simulator):
         X = np.empty((len(self.inverse) + 1, self.n))
         X[0] = x
         cache = {}
-        with _single_threaded_blas():
+        with single_thread_blas():
             for k in range(len(self.inverse)):
                 j = self.inverse[k]
                 if j not in cache:

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .._blas import single_thread_blas
 from ..errors import BoundWarning, DataError, EstimationError
 from ..model import RBAR_V_PAPER
 from ..network import ThermalNetwork
 from .data import GreyboxData
-from .kalman import single_thread
 from .optimize import CRITERIA, minimize_criterion
 from .problem import GreyboxOptions, GreyboxProblem
 
@@ -234,7 +234,7 @@ class GreyboxEstimator:
         if self.rbar_starts is not None and pb.i_rbar:
             starts = list(self.rbar_starts)
         best, tried = None, []
-        with single_thread():
+        with single_thread_blas():
             for r0 in starts:
                 eta0 = lay.eta0()
                 if r0 is not None:
@@ -303,5 +303,5 @@ class GreyboxEstimator:
     def score(self, data) -> float:
         """Negative log-likelihood per observation of other data at the fitted parameters."""
         pb = self.problem_for(data)
-        with single_thread():
+        with single_thread_blas():
             return pb.nll(self.eta_) / max(pb.n_obs, 1)

@@ -46,21 +46,16 @@ from .._blas import single_thread_blas
 from ..errors import EstimationError
 
 __all__ = ["expm_taylor", "n_squarings", "discretize", "discretize_np", "dare_sda", "dare_np",
-           "stein_np", "DareCallback", "single_thread",
+           "stein_np", "DareCallback",
            "stationary_filter", "kalman_filter", "KalmanResult", "chunked_recursion",
            "LOG2PI"]
 
 LOG2PI = math.log(2.0 * math.pi)
 
 
-def single_thread():
-    """Context: BLAS on one thread (:func:`thermctl._blas.single_thread_blas`).
-
-    The matrices here are small (n ≲ 100) and used thousands of times; a threaded BLAS on
-    a shared machine spends far more in thread wake-ups than in arithmetic (measured:
-    20 ms vs 0.3 ms for one 61×61 LU solve on a loaded 2-core machine).
-    """
-    return single_thread_blas()
+# The old name, kept only for greybox/selection.py, which still imports it; everything
+# else calls thermctl._blas.single_thread_blas directly.
+single_thread = single_thread_blas
 _TAYLOR_ORDER = 10      # with ||M|| <= 1/4 the truncation error is 0.25^11/11! ≈ 6e-15
 _NORM_TARGET = 0.25
 
@@ -372,7 +367,7 @@ def kalman_filter(Phi, Gamma, Qd, C, R, W, Y, x0, P0, skip: int = 0) -> KalmanRe
         Steps at the start whose terms are left out of ``nll`` (burn-in); they still
         update the state.
     """
-    with single_thread():
+    with single_thread_blas():
         return _kalman_filter(Phi, Gamma, Qd, C, R, W, Y, x0, P0, skip)
 
 
@@ -500,7 +495,7 @@ class _DareReverse(ca.Callback):
         return ca.Sparsity.dense(m, m)
 
     def eval(self, arg):
-        with single_thread():
+        with single_thread_blas():
             return self._eval(arg)
 
     def _eval(self, arg):
@@ -547,7 +542,7 @@ class DareCallback(ca.Callback):
 
     def eval(self, arg):
         Phi, Q, R = (np.asarray(a, dtype=float) for a in arg)
-        with single_thread():
+        with single_thread_blas():
             P, self.n_iter = dare_np(Phi, self.C, 0.5 * (Q + Q.T), 0.5 * (R + R.T))
         return [P]
 

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._blas import single_thread_blas
 from ..errors import DataError
-from .kalman import single_thread
 
 __all__ = ["KStepResult", "filtered_states", "kstep_errors"]
 
@@ -74,7 +74,7 @@ def filtered_states(problem, eta):
     W = problem.inputs(eta)
     Phi, Gam, Kf, C = m["Phi"], m["Gamma"], m["Kf"], problem.C
     out = []
-    with single_thread():
+    with single_thread_blas():
         for s, (a, b) in enumerate(problem.segments):
             x = m["X0"][:, s].copy()
             Xp = np.empty((b - a, problem.n))
@@ -130,7 +130,7 @@ def kstep_errors(problem, eta, horizons=(3600.0, 6 * 3600.0, 24 * 3600.0), strid
     se = np.zeros((len(hs), ny))
     cnt = np.zeros(len(hs), dtype=int)
     use = problem.fit_rows if rows == "fit" else np.ones(len(problem.Y), dtype=bool)
-    with single_thread():
+    with single_thread_blas():
         for a, b, Xp, Xf, E in filtered_states(problem, eta):
             starts = np.arange(a + problem.burn, b - 1, st)
             if not len(starts):

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2, norm
 
+from .._blas import single_thread_blas
 from ..errors import ConvergenceWarning, EstimationError
-from .kalman import single_thread
 from .optimize import minimize_criterion
 
 __all__ = ["ParameterInterval", "IdentifiabilityReport", "hessian_fd", "wald_intervals",
@@ -138,7 +138,7 @@ def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step:
     idx = np.flatnonzero(free)
     grad = problem.nll_grad if criterion == "likelihood" else problem.kstep_grad
     H = np.zeros((len(idx), len(idx)))
-    with single_thread():
+    with single_thread_blas():
         for j, i in enumerate(idx):
             h = rel_step * max(1.0, abs(eta[i]))
             ep, em = eta.copy(), eta.copy()
@@ -267,7 +267,7 @@ def profile_likelihood(problem, eta, name: str, level: float = 0.9, *, step: flo
     thr = chi2.ppf(level, 1) / 2.0 * max(1.0, float(inflation))
     free = lay.free().copy()
     free[i] = False
-    with single_thread():
+    with single_thread_blas():
         f_hat = problem.nll(eta) if nll_hat is None else nll_hat
         pts = {eta[i]: 0.0}
         ends = {}
