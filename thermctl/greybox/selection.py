@@ -35,7 +35,7 @@ import numpy as np
 from ..errors import BoundWarning, ConvergenceWarning, EstimationError, SpecError
 from ..network import ThermalNetwork
 from .estimator import GreyboxEstimator, as_greybox_data
-from .kalman import single_thread
+from .._blas import single_thread_blas
 
 __all__ = ["Candidate", "SelectionStep", "SelectionResult", "candidate_pairs", "sin_candidates",
            "select_edges", "CRITERIA"]
@@ -234,7 +234,7 @@ class _Searcher:
             init[f"rbar_v[{c.name}]"] = R_OFF
         pb = est2.make_problem(self.train, init=init)
         eta = pb.layout.eta0()
-        with single_thread():
+        with single_thread_blas():
             f0 = pb.nll(eta)
             rb0 = _start_rbar(base)
             dk = 1 + (0 if any(k.startswith("tau0") for k in base) else 1)
