@@ -103,6 +103,9 @@ class IdentifyOptions:
     scheduler : str or None
         ``scale="local"``: a Dask scheduler address (``tcp://host:8786``) to send the local
         problems to instead of local processes.
+    local_rows : {"auto", "all", "supply_off"}
+        ``scale="local"``: samples whose innovations count in the local likelihoods (as
+        :class:`thermctl.greybox.GreyboxOptions` ``fit_rows``).
     refit_max_states : int
         ``scale="local"``: refit the selected structure on the whole building (one shared
         R̄_v, intervals) when its model has at most this many states; above, the model
@@ -132,6 +135,7 @@ class IdentifyOptions:
     combine: str = "sum"
     workers: int | None = None
     scheduler: str | None = None
+    local_rows: str = "auto"
     refit_max_states: int = 150
 
     def check(self):
@@ -141,7 +145,8 @@ class IdentifyOptions:
                               ("intervals", ("profile", "wald", "none")),
                               ("estimator", ("nlp", "single_shooting", "grid", "none")),
                               ("scale", ("auto", "global", "local")),
-                              ("combine", ("sum", "both", "either"))):
+                              ("combine", ("sum", "both", "either")),
+                              ("local_rows", ("auto", "all", "supply_off"))):
             if getattr(self, name) not in allowed:
                 raise DataError(f"identify option {name} must be one of {list(allowed)}, "
                                 f"found {getattr(self, name)!r}")
@@ -378,7 +383,8 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
 
     li = identify_local(meas.spec, cal.frame, rule=opt.combine, criterion=opt.selection_criterion,
                         margin=opt.margin, solar=opt.solar, workers=opt.workers,
-                        client=client or opt.scheduler, progress=progress)
+                        client=client or opt.scheduler, progress=progress,
+                        fit_rows=opt.local_rows)
     return _finish_local(meas, cal, val, opt, li, progress)
 
 
@@ -484,7 +490,8 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         t0 = _time.perf_counter()
         results = run_local(problems, frames, workers=opt.workers, client=client,
                             progress=progress, criterion=opt.selection_criterion,
-                            margin=opt.margin, solar=opt.solar) if problems else []
+                            margin=opt.margin, solar=opt.solar,
+                            fit_rows=opt.local_rows) if problems else []
         wall = _time.perf_counter() - t0
         out = {}
         for k in local:

@@ -610,7 +610,8 @@ class LocalIdentification:
 
 def identify_local(spec: BuildingSpec, frame, *, rule: str = "sum", criterion: str = "bic",
                    margin: float = 10.0, solar: bool = True, workers: int | None = None,
-                   client=None, progress=None, parallel: bool = True) -> LocalIdentification:
+                   client=None, progress=None, parallel: bool = True,
+                   fit_rows: str = "auto") -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -632,6 +633,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "sum", criterion: s
         ``progress(stage, done, total)``.
     parallel : bool
         Air paths beside walls are candidates.
+    fit_rows : {"auto", "all", "supply_off"}
+        Samples of the local likelihoods (:func:`fit_local`).
 
     Returns
     -------
@@ -646,7 +649,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "sum", criterion: s
     t0 = time.perf_counter()
     problems = local_problems(spec, frame.columns, parallel=parallel)
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
-                        criterion=criterion, margin=margin, solar=solar)
+                        criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows)
     return assemble(problems, results, rule, margin, time.perf_counter() - t0)
 
 

@@ -112,6 +112,9 @@ def identify(
                                   "(tcp://HOST:8786) to run them on instead of local processes."),
     combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="Local problems: how an air path's "
                                 "two ends decide: sum (of their BIC changes), both or either."),
+    local_rows: str = typer.Option(_IDENT_DEFAULTS.local_rows, help="Local problems: samples of "
+                                   "the local likelihoods: auto (supply-off hours when there are "
+                                   "enough, as the whole-building fit), all or supply_off."),
 ):
     """Identify convection edges and their parameters; write model.json, identification.json, figures.
 
@@ -140,7 +143,8 @@ def identify(
                           window_hours=window_hours, initial_state=initial_state, grid=grid,
                           calibration=_window(calibration, "--calibration"),
                           validation=_window(validation, "--validation"),
-                          scale=scale, workers=workers, scheduler=scheduler, combine=combine)
+                          scale=scale, workers=workers, scheduler=scheduler, combine=combine,
+                          local_rows=local_rows)
     with progress("identify") as bar:
         ident = run_identify(meas, opt, progress=_progress_callback(bar))
     paths = write_outputs(ident, out)
