@@ -388,7 +388,7 @@ def _dynamics(model, substeps: int):
 def main(argv=None):
     """Run the economic MPC against the baseline on the testbed; print and save the table."""
     from .simulator import run_example
-    return run_example("economic", argv)
+    return run_example("economic", EconomicMPC, argv)
 
 
 if __name__ == "__main__":

@@ -408,7 +408,7 @@ def _mid(X):
 def main(argv=None):
     """Run the linear MPC against the baseline on the testbed; print and save the table."""
     from .simulator import run_example
-    return run_example("linear", argv)
+    return run_example("linear", LinearMPC, argv)
 
 
 if __name__ == "__main__":

@@ -27,12 +27,16 @@ import numpy as np
 import pandas as pd
 
 from .common import format_table
+from .economic_mpc import EconomicMPC
+from .linear_mpc import LinearMPC
 from .model import controller_model, reduced_model
 from .simulator import make_controller, make_scenario, run_mpc
 
 __all__ = ["main"]
 
 log = logging.getLogger(__name__)
+
+CONTROLLERS = {"economic": EconomicMPC, "linear": LinearMPC}
 
 
 def _skipped(kind, scn, nx):
@@ -53,7 +57,7 @@ def _measure(kind, scn, model, args):
         log.warning("%s MPC on %d states skipped (--max-states %d)", kind, nx, args.max_states)
         return _skipped(kind, scn, nx)
     t0 = time.perf_counter()
-    mpc = make_controller(kind, model, scn, args.step, N)
+    mpc = make_controller(CONTROLLERS[kind], model, scn, args.step, N)
     build = time.perf_counter() - t0
     its = []
     solve = mpc.solve

@@ -283,8 +283,12 @@ def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.35,
     return _result(name, scn, plant, T, ms_rec, Ts_rec, scn.n_steps, times, cpu, fails)
 
 
-def run_example(kind: str, argv=None):
-    """Command-line entry of both examples: baseline(s) and MPC(s), table, figure."""
+def run_example(kind: str, cls, argv=None):
+    """Command-line entry of both examples: baseline(s) and MPC(s), table, figure.
+
+    ``cls`` is the controller class (``EconomicMPC`` or ``LinearMPC``): the example modules
+    pass themselves in, so this module never imports them (no import cycle).
+    """
     parser = example_parser("Economic (nonlinear) MPC" if kind == "economic" else "Linear MPC (QP)")
     if kind == "economic":
         parser.add_argument("--transcription", choices=["implicit", "explicit"], default="implicit",
@@ -311,7 +315,7 @@ def run_example(kind: str, argv=None):
     for mk in kinds:
         full = controller_model(scn.tb, mk, end=scn.start)
         model = reduced_model(scn.tb, full, args.order) if args.order else full
-        mpc = make_controller(kind, model, scn, args.step, N,
+        mpc = make_controller(cls, model, scn, args.step, N,
                               **({"transcription": args.transcription} if kind == "economic"
                                  else {"solver": args.qp_solver}))
         label = f"{'economic NMPC' if kind == 'economic' else 'linear MPC'} ({mk} model)"
@@ -341,12 +345,15 @@ def run_example(kind: str, argv=None):
     return table
 
 
-def make_controller(kind: str, model, scn: Scenario, step_minutes: float, N: int, **options):
+def make_controller(cls, model, scn: Scenario, step_minutes: float, N: int, **options):
     """The example's MPC for ``scn``.
 
     Parameters
     ----------
-    kind : {"economic", "linear"}
+    cls : type
+        :class:`~mpc_examples.economic_mpc.EconomicMPC` or
+        :class:`~mpc_examples.linear_mpc.LinearMPC` (given by the caller: the simulator does
+        not import the controllers, which import it for their ``main``).
     model : ThermalModel or ReducedNetwork
     scn : Scenario
     step_minutes : float
@@ -354,15 +361,7 @@ def make_controller(kind: str, model, scn: Scenario, step_minutes: float, N: int
     N : int
         Horizon [steps].
     **options
-        Passed to :class:`~mpc_examples.economic_mpc.EconomicMPC` (e.g. ``transcription``)
-        or :class:`~mpc_examples.linear_mpc.LinearMPC` (e.g. ``solver``).
+        Passed to ``cls`` (e.g. ``transcription`` for the economic MPC, ``solver`` for the
+        linear one).
     """
-    if kind == "economic":
-        from .economic_mpc import EconomicMPC
-        cls = EconomicMPC
-    elif kind == "linear":
-        from .linear_mpc import LinearMPC
-        cls = LinearMPC
-    else:
-        raise ValueError(f"kind must be 'economic' or 'linear', found {kind!r}")
     return cls(model, scn.hvac, scn.comfort_zones, dt=step_minutes * 60.0, horizon=N, **options)
