@@ -96,16 +96,18 @@ class IdentifyOptions:
         local above ``local_above`` measured zones.
     local_above : int
         Measured zones above which ``scale="auto"`` goes local.
-    combine : {"sum", "both", "either"}
-        ``scale="local"``: how the verdicts of an air path's two ends combine.
+    combine : {"both", "sum", "either"}
+        ``scale="local"``: how the verdicts of an air path's two ends combine
+        (:func:`thermctl.local.combine`).
     workers : int or None
         ``scale="local"``: local processes (default every core).
     scheduler : str or None
         ``scale="local"``: a Dask scheduler address (``tcp://host:8786``) to send the local
         problems to instead of local processes.
-    local_rows : {"auto", "all", "supply_off"}
+    local_rows : {"all", "auto", "supply_off"}
         ``scale="local"``: samples whose innovations count in the local likelihoods (as
-        :class:`thermctl.greybox.GreyboxOptions` ``fit_rows``).
+        :class:`thermctl.greybox.GreyboxOptions` ``fit_rows``; see
+        :func:`thermctl.local.fit_local` for why ``all``).
     refit_max_states : int
         ``scale="local"``: refit the selected structure on the whole building (one shared
         R̄_v, intervals) when its model has at most this many states; above, the model
@@ -132,10 +134,10 @@ class IdentifyOptions:
     validation: tuple | None = None
     scale: str = "auto"
     local_above: int = 12
-    combine: str = "sum"
+    combine: str = "both"
     workers: int | None = None
     scheduler: str | None = None
-    local_rows: str = "auto"
+    local_rows: str = "all"
     refit_max_states: int = 150
 
     def check(self):

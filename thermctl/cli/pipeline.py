@@ -111,10 +111,10 @@ def identify(
     scheduler: str = typer.Option(None, help="Local problems: a Dask scheduler address "
                                   "(tcp://HOST:8786) to run them on instead of local processes."),
     combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="Local problems: how an air path's "
-                                "two ends decide: sum (of their BIC changes), both or either."),
+                                "two ends decide: both (each end keeps it), sum (of their BIC changes) or either."),
     local_rows: str = typer.Option(_IDENT_DEFAULTS.local_rows, help="Local problems: samples of "
-                                   "the local likelihoods: auto (supply-off hours when there are "
-                                   "enough, as the whole-building fit), all or supply_off."),
+                                   "the local likelihoods: all, auto (supply-off hours when "
+                                   "there are enough, as the whole-building fit) or supply_off."),
 ):
     """Identify convection edges and their parameters; write model.json, identification.json, figures.
 
@@ -167,7 +167,7 @@ def identify_many(
     workers: int = typer.Option(None, min=1, help="Local processes (default: every core)."),
     scheduler: str = typer.Option(None, help="Dask scheduler address (tcp://HOST:8786): every "
                                   "building's local problems go there as one set of tasks."),
-    combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="sum, both or either (as identify)."),
+    combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="both, sum or either (as identify)."),
 ):
     """Identify many buildings with the default grey-box method, as one set of tasks.
 
