@@ -197,3 +197,31 @@ def test_cli_identify_many_writes_one_folder_per_building(tmp_path):
     for name in ("a", "b"):
         assert (tmp_path / "out" / name / "model.json").is_file()
         assert (tmp_path / "out" / name / "identification.json").is_file()
+
+
+@pytest.fixture(scope="module")
+def pugh(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pugh")
+    generate("pugh-hall", days=14, seed=0).write(out)
+    from thermctl.spec import load_spec
+    spec = load_spec(out / "building.yaml")
+    return spec, read_measurements(out / "data.csv", spec)
+
+
+def test_local_finds_what_the_whole_building_method_finds(pugh):
+    """On the 7-zone testbed the local problems keep every air path the whole-building
+    likelihood keeps, with per-edge R̄_v within a factor 2 of its estimate; they also keep
+    false paths it does not (measured: 3, and those share the exchange of r241-r247, whose
+    local R̄_v is 2.1e-4 against 3.7e-4; docs/identification.md says why)."""
+    from thermctl.identify import IdentifyOptions, identify
+    spec, meas = pugh
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        glob = identify(meas, IdentifyOptions(scale="global", intervals="none"))
+        loc = identify(meas, IdentifyOptions(scale="local", intervals="none", workers=2))
+    g = {e.name for e in glob.model.network.convection_edges}
+    kept = {v.name for v in loc.local.verdicts if v.kept}
+    assert len(g) >= 2 and g <= kept
+    rb = float(np.atleast_1d(glob.model.rbar_v)[0])
+    for name in g:
+        assert rb / 2 < loc.local.rbar_v[name] < rb * 2, (name, loc.local.rbar_v[name], rb)
