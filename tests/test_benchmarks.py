@@ -175,3 +175,44 @@ def test_summarize_by_hand(bench):
     assert "median R̄v error <= 25 %: SIN + argmax × Kalman" in t
     assert "48-h validation <= 2 % worse than the oracle on every zone of every building: " \
            "true edges × Kalman" in t
+
+
+@pytest.mark.slow
+def test_scale_quick_serial_and_processes_agree():
+    """benchmarks/scale.py --quick: a 9-zone corridor (8 measured offices), local problems
+    with 1 and 2 workers; one table row each, the same air paths either way (the runners
+    agree bit for bit), and the measures filled in. About 1.5 min on two idle cores."""
+    path = SCRIPT.parent / "scale.py"
+    spec = importlib.util.spec_from_file_location("bench_scale", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod            # dataclasses resolve annotations through it
+    try:
+        spec.loader.exec_module(mod)
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            res = mod.main(["--quick"])
+    finally:
+        sys.modules.pop(spec.name, None)
+    text = out.getvalue()
+    assert res.text.strip() == text.strip()
+    assert [(r.scale, r.workers) for r in res.rows] == [("local", 1), ("local", 2)]
+    one, two = res.rows
+    for r in res.rows:
+        assert r.ok and not r.failed_problems, r.note
+        assert (r.zones, r.measured, r.problems) == (9, 8, 8)
+        assert 0 < r.states_med <= r.states_max and r.model_states > r.zones
+        assert r.wall > 0 and r.cpu > 0 and r.rss_mb > 0
+        assert r.n_true == 4 and 0 <= r.n_hit <= r.n_true and r.n_false >= 0
+        assert (r.n_hit == 0) == math.isnan(r.rbar_err)
+    assert one.edges == two.edges
+    assert one.rbar_err == pytest.approx(two.rbar_err, nan_ok=True)
+    # the tasks' CPU is counted once: in-process for workers=1, from the workers for 2
+    assert one.cpu == pytest.approx(one.cpu_all, rel=0.05, abs=0.5)
+    lines = text.splitlines()
+    head = next(k for k, ln in enumerate(lines) if ln.startswith("| building"))
+    for col in ("zones", "meas", "probs", "st med", "st max", "model st", "wall s", "CPU s",
+                "RSS MB", "recall", "false", "f/10z", "R̄v err"):
+        assert col in lines[head]
+    body = lines[head + 2:head + 4]
+    assert all(ln.startswith("| corridor 9 ") for ln in body)
+    assert "load average" in text and "cores" in text
