@@ -181,7 +181,7 @@ def test_summarize_by_hand(bench):
 def test_scale_quick_serial_and_processes_agree():
     """benchmarks/scale.py --quick: a 9-zone corridor (8 measured offices), local problems
     with 1 and 2 workers; one table row each, the same air paths either way (the runners
-    agree bit for bit), and the measures filled in. About 1.5 min on two idle cores."""
+    agree bit for bit), and the measures filled in. 107 s on the shared 2-core machine."""
     path = SCRIPT.parent / "scale.py"
     spec = importlib.util.spec_from_file_location("bench_scale", path)
     mod = importlib.util.module_from_spec(spec)
