@@ -2,7 +2,7 @@
 
 On closed-loop data the zones sit near their set points and unmeasured gains
 dominate the error, so a 48-h open-loop simulation barely separates models
-(DESIGN.md, "Validation: measures that tell"). What an MPC acts through is the
+(docs/identification.md, validation). What an MPC acts through is the
 response of every zone temperature to heat put into each zone: the step-response
 matrix. Between the two sits the k-step-ahead prediction error from Kalman-filtered
 states (1, 6, 24 h): what an MPC's predictions over its horizon would miss, with the

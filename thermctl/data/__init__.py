@@ -1,6 +1,6 @@
 """Measured data: CSV/parquet ingest, units, resampling, gaps, splits, day × time-of-day arrays.
 
-The exchange format (DESIGN.md, "Data exchange formats") is a wide table, one row per
+The exchange format (docs/data-format.md) is a wide table, one row per
 time stamp:
 
 =================  ==========================  =============================================

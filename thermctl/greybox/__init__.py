@@ -1,6 +1,6 @@
 """Stochastic grey-box identification: Kalman-filter likelihood with unmeasured gains.
 
-Beyond the paper (DESIGN.md, "Beyond the paper: real buildings"): the network model is
+Beyond the paper (docs/identification.md): the network model is
 augmented with per-zone random-walk heat gains, solar apertures and noise, and fitted by
 maximum likelihood through a stationary continuous–discrete Kalman filter built in
 CasADi (exact derivatives), or by k-step-ahead prediction error from filtered states.

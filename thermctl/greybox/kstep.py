@@ -5,7 +5,7 @@ filter, predict ``h`` steps ahead with the measured inputs and without further u
 and compare with the measured zone temperatures. The unmeasured gains are held at their
 filtered values over the horizon (the random walk's best prediction), and the supply
 heat uses the *predicted* zone temperature, so a prediction learns nothing from the
-measurements it is scored on. This is the measure DESIGN.md asks for at 1, 6 and 24 h,
+measurements it is scored on. This is the measure thermctl validates with at 1, 6 and 24 h,
 for the identified and the conduction-only model alike.
 
 The CasADi version of the same criterion (for estimation) is
