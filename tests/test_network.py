@@ -140,7 +140,7 @@ def test_input_vector_errors(small_network, kwargs, match):
                           r"pair; add it under 'distances' or pass d"),
     ([("r1", "r7")], r"convection edge r1-r7: 'r7' is not a zone of small\.yaml; zones are "
                      r"\['r1', 'r2', 'r3', 'hallway'\]"),
-    ([("r1", "outside", 3.0)], r"'outside' is not a zone of small\.yaml"),
+    ([("outside", "ground", 3.0)], r"'ground' is not a zone of small\.yaml"),
     ([("r1", "r3"), ("r3", "r1")], r"convection edge r1-r3 given twice"),
     ([("r1", "r2"), ("r1", "r2", 5.0)], r"convection edge r1-r2 given twice"),
     ([("r2", "r2", 3.0)], r"convection edge names zone 'r2' twice"),
@@ -152,3 +152,18 @@ def test_input_vector_errors(small_network, kwargs, match):
 def test_network_errors(small_spec, convection, match):
     with pytest.raises(SpecError, match=match):
         ThermalNetwork(small_spec, convection=convection)
+
+
+def test_air_path_to_a_boundary_node_needs_a_length(small_spec):
+    """A local problem's measured neighbour is a boundary node: an air path to it is
+    allowed with its length given, refused without."""
+    net = ThermalNetwork(small_spec, [("r1", "outside", 3.0)])
+    e = net.convection_edges[0]
+    assert (e.a, e.b, e.d) == ("outside", "r1", 3.0)
+    assert net.n_states == small_network_states(small_spec) + 2
+    with pytest.raises(SpecError, match="'outside' is not a zone"):
+        ThermalNetwork(small_spec, [("r1", "outside")])
+
+
+def small_network_states(spec):
+    return ThermalNetwork(spec).n_states

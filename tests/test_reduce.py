@@ -117,8 +117,9 @@ def test_hsv_agree_with_python_control_and_general_path(floor):
     big = theirs > 1e-4 * theirs[0]
     np.testing.assert_allclose(ours[big], theirs[big], rtol=1e-6)
     # python-control takes sqrt(eig(Wc·Wo)) of a non-symmetric product: small values only
-    # agree in absolute terms
-    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-9 * theirs[0])
+    # agree in absolute terms, and its tail is rounding noise (measured: two values of
+    # 1.5e-9·σ1 where ours are 0, with this machine's numpy/OpenBLAS)
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-8 * theirs[0])
     # a similarity transform destroys the symmetric structure: the scipy Bartels-Stewart
     # path must give the same (similarity-invariant) values
     T = np.linalg.qr(np.random.default_rng(0).standard_normal((sys.nstates,) * 2))[0]
