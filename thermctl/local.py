@@ -360,7 +360,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
         if st.action == "add":
             evidence[st.edge] = float(st.delta)
         if st.action == "remove":
-            evidence[st.edge] = float(st.delta and -st.delta)
+            evidence[st.edge] = -float(st.delta)     # what removing it cost, negated
         if st.action == "keep":
             evidence.update({k: -float(v) for k, v in st.screened.items()})
     kept = [_pair_name(a, b) for a, b, _ in sel.edges]
