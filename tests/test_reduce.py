@@ -113,7 +113,9 @@ def test_hsv_agree_with_python_control_and_general_path(floor):
     model, op = floor
     sys = linearize(model, op)
     ours = hankel_singular_values(model, op)
-    theirs = np.sort(np.real(ct.hankel_singular_values(scaled(sys))))[::-1]
+    # python-control's tail is sqrt of eigenvalues at rounding level: on some installs
+    # slightly negative, so NaN (measured on a fresh venv: 2 of 51) — those are zeros
+    theirs = np.sort(np.nan_to_num(np.real(ct.hankel_singular_values(scaled(sys))), nan=0.0))[::-1]
     big = theirs > 1e-4 * theirs[0]
     np.testing.assert_allclose(ours[big], theirs[big], rtol=1e-6)
     # python-control takes sqrt(eig(Wc·Wo)) of a non-symmetric product: small values only
