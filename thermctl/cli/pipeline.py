@@ -220,6 +220,19 @@ def identify_many(
     return idents
 
 
+def _with_defaults(command, *args, **kwargs):
+    """Call a command function from Python with its CLI defaults for every option not given
+    (typer's defaults are ``OptionInfo`` objects until the CLI parses them)."""
+    import inspect
+    sig = inspect.signature(getattr(command, "__wrapped__", command))
+    bound = sig.bind_partial(*args, **kwargs)
+    for name, par in sig.parameters.items():
+        if name not in bound.arguments:
+            d = par.default
+            bound.arguments[name] = getattr(d, "default", d)
+    return command(*bound.args, **bound.kwargs)
+
+
 def _window(text, what):
     if text is None:
         return None
@@ -419,16 +432,11 @@ def demo(
     console.print(f"wrote {paths['data']} ({len(tb.data)} samples); true air paths: "
                   + ", ".join(f"{a}–{b}" for a, b, _ in tb.truth.edges))
     console.rule("2/4 identify")
-    ident = identify(paths["data"], building=paths["building"], out=out, units="si",
-                     criterion="likelihood", selection="model", candidates="sin", margin=10.0,
-                     selection_criterion="bic",
-                     solar=True, intervals="profile", method="sin",
-                     rule="paper", s_min=0.25, level=0.05, allow_parallel=False, estimator="nlp",
-                     window_hours=12.0, initial_state="paper", grid=True, calibration=None,
-                     validation=None, gap_limit="30min")
+    # the commands' own defaults (which read IdentifyOptions): one place for each default
+    ident = _with_defaults(identify, paths["data"], building=paths["building"], out=out)
     console.rule("3/4 validate")
-    vr = validate(out / "model.json", paths["data"], out=out, units="si", hours=48.0, start=None, kstep=True,
-                  validation=None, truth=paths["truth"])
+    vr = _with_defaults(validate, out / "model.json", paths["data"], out=out,
+                        truth=paths["truth"])
     console.rule("4/4 report")
     path = report(out)
     true_edges = {frozenset((a, b)) for a, b, _ in tb.truth.edges}
