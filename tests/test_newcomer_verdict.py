@@ -56,3 +56,18 @@ def test_relative_words():
     assert relative_words(-0.08) == "8 % worse"
     assert relative_words(0.12) == "12 % better"
     assert relative_words(0.001) == "as good"
+
+
+def test_a_testbed_truth_decides_the_verdict():
+    """The demo's numbers: predictions within ±5 % at 6 h, step responses 2 % vs 64 % off the
+    truth: the truth says the identified model, and the text says why."""
+    from thermctl.validate import verdict
+    v = verdict(0.0, {1.0: 0.11, 6.0: 0.04, 24.0: 0.05}, truth_gain=1 - 0.019 / 0.638)
+    assert v.recommendation == "identified" and v.basis == "truth"
+    assert "truth decides" in v.text
+    # a truth that favours neither leaves the k-step rule in charge
+    v = verdict(0.0, {1.0: 0.11, 6.0: 0.04}, truth_gain=0.01)
+    assert v.recommendation == "mixed"
+    # and a truth against the air paths recommends conduction-only even when k-step likes them
+    v = verdict(0.2, {1.0: 0.2, 6.0: 0.2}, truth_gain=-0.5)
+    assert v.recommendation == "conduction-only"
