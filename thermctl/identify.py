@@ -236,9 +236,13 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     if opt.paper or opt.selection == "scores":
         ident = _identify_paper(meas, cal, val, opt, progress)
     elif opt.is_local(meas.spec):
-        ident = _identify_local(meas, cal, val, opt, progress, client)
+        return _identify_local(meas, cal, val, opt, progress, client)
     else:
         ident = _identify_greybox(meas, cal, val, opt, progress)
+    if client is not None or opt.scheduler or opt.workers:
+        ident.notes.append(f"--workers/--scheduler apply to local problems only; this building "
+                           f"({len(meas.spec.measured_zones)} measured zones, --scale "
+                           f"{opt.scale}) was identified as a whole in this process")
     return ident
 
 
