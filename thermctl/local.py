@@ -152,19 +152,16 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
     list of LocalProblem
         In spec order.
     """
+    from .greybox.selection import candidate_pairs
+
     meas = set(spec.measured_zones)
     zone_set = set(spec.zone_names)
-    # candidate pairs of the whole building: given lengths, and (parallel) wall pairs
-    pairs = {tuple(sorted((d.a, d.b))) for d in spec.distances}
-    if parallel:
-        pairs |= {tuple(sorted(p)) for p in spec.wall_pairs()}
+    # the whole building's candidates, as the whole-building selection sees them
+    allc = candidate_pairs(spec, include_unmeasured=unmeasured, parallel=parallel)
     touching: dict[str, set] = {z: set() for z in zone_set}
-    for w in spec.walls:
-        touching.setdefault(w.a, set()).add(w.b)
-        touching.setdefault(w.b, set()).add(w.a)
-    for a, b in pairs:
-        touching[a].add(b)
-        touching[b].add(a)
+    for a, b in [(w.a, w.b) for w in spec.walls] + [c.pair for c in allc]:
+        touching.setdefault(a, set()).add(b)
+        touching.setdefault(b, set()).add(a)
     out = []
     for z in (spec.measured_zones if zones is None else zones):
         if z not in meas:
@@ -179,14 +176,7 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
                     stack.append(m)
         zones_l = [zz for zz in spec.zones if zz.name in local]
         walls = [w for w in spec.walls if w.a in local or w.b in local]
-        cands = []
-        for a, b in sorted(pairs):
-            if z not in (a, b) or (not unmeasured and not (a in meas and b in meas)):
-                continue
-            d, _ = spec.air_path_length(a, b)
-            if d is None:
-                continue
-            cands.append((a, b, float(d)))
+        cands = [(c.a, c.b, c.d) for c in allc if z in c.pair]
         keep_exact = {z}
         walls, aggregates = _aggregate_far_walls(walls, local, keep_exact, meas) \
             if aggregate else (walls, [])
