@@ -177,8 +177,7 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         zones_l = [zz for zz in spec.zones if zz.name in local]
         walls = [w for w in spec.walls if w.a in local or w.b in local]
         cands = [(c.a, c.b, c.d) for c in allc if z in c.pair]
-        keep_exact = {z}
-        walls, aggregates = _aggregate_far_walls(walls, local, keep_exact, meas) \
+        walls, aggregates = _aggregate_far_walls(walls, local, z, meas) \
             if aggregate else (walls, [])
         nodes = {w.a for w in walls} | {w.b for w in walls}
         nodes |= {n for a, b, _ in cands for n in (a, b)}
@@ -193,8 +192,8 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         sub = BuildingSpec(f"{spec.name}:{z}", tuple(zones_l), tuple(bnd), tuple(walls), dists,
                            1.0, spec.w_s, f"{spec.source} (local problem of {z})")
         cols = [f"T:{n}" for n in [z] + bnd if n not in agg_nodes]
-        for zz in local:
-            cols += [f"ms:{zz}", f"Ts:{zz}", f"Q:{zz}"]
+        for zz in zones_l:          # spec order, not set order: the same columns every run
+            cols += [f"ms:{zz.name}", f"Ts:{zz.name}", f"Q:{zz.name}"]
         if columns is not None:
             have = set(columns)
             cols = [c for c in cols if c in have] + sorted(c for c in have
@@ -211,7 +210,7 @@ def _wall_shape(w):
             float(f"{Rt * Ct:.6g}"))
 
 
-def _aggregate_far_walls(walls, local, keep_exact, meas):
+def _aggregate_far_walls(walls, local, zone, meas):
     """Merge the walls from a latent zone to measured zones outside the problem.
 
     A latent hallway touches every office on its floor, and each of those walls would add
@@ -221,7 +220,7 @@ def _aggregate_far_walls(walls, local, keep_exact, meas):
     hallway equals that of one wall with ``s = Σ s_j`` whose far end is at the weighted
     mean ``Σ s_j T_j / Σ s_j`` — exact, not an approximation. The mean becomes a boundary
     node ``<zone>~<k>`` of the local problem (computed by :meth:`LocalProblem.data`).
-    Walls to the problem's own candidate partners stay separate.
+    The problem's own ``zone``'s walls stay separate.
     """
     from .spec import Wall
     keep, groups = [], {}
@@ -229,7 +228,7 @@ def _aggregate_far_walls(walls, local, keep_exact, meas):
         a_in, b_in = w.a in local, w.b in local
         far = w.b if a_in else w.a
         near = w.a if a_in else w.b
-        if (a_in and b_in) or near in keep_exact or far in keep_exact or far not in meas:
+        if (a_in and b_in) or zone in (near, far) or far not in meas:
             keep.append(w)
             continue
         groups.setdefault((near, _wall_shape(w)), []).append((w, far))

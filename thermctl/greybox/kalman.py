@@ -53,9 +53,6 @@ __all__ = ["expm_taylor", "n_squarings", "discretize", "discretize_np", "dare_sd
 LOG2PI = math.log(2.0 * math.pi)
 
 
-# The old name, kept only for greybox/selection.py, which still imports it; everything
-# else calls thermctl._blas.single_thread_blas directly.
-single_thread = single_thread_blas
 _TAYLOR_ORDER = 10      # with ||M|| <= 1/4 the truncation error is 0.25^11/11! ≈ 6e-15
 _NORM_TARGET = 0.25
 
