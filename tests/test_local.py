@@ -225,3 +225,38 @@ def test_local_finds_what_the_whole_building_method_finds(pugh):
     rb = float(np.atleast_1d(glob.model.rbar_v)[0])
     for name in g:
         assert rb / 2 < loc.local.rbar_v[name] < rb * 2, (name, loc.local.rbar_v[name], rb)
+
+
+def _chain_spec():
+    """Offices A, B, C; hallways H1 (next to A) and H2 (next to B and C), joined by a slab."""
+    from thermctl.spec import BuildingSpec, Wall, Zone
+    zones = (Zone("A", 60.0), Zone("B", 60.0), Zone("C", 60.0),
+             Zone("H1", 90.0, measured=False), Zone("H2", 90.0, measured=False))
+    R = (0.01, 0.02, 0.01)
+    Cw = (1e6, 1e6)
+    walls = (Wall("A", "H1", R, Cw), Wall("H1", "H2", (0.002, 0.004, 0.002), (5e6, 5e6)),
+             Wall("H2", "B", R, Cw), Wall("H2", "C", (0.02, 0.04, 0.02), (5e5, 5e5)),
+             Wall("H2", "out", (0.1, 0.2, 0.1), Cw), Wall("A", "out", R, Cw))
+    return BuildingSpec("chain", zones, ("out",), walls)
+
+
+def test_latent_depth_bounds_the_closure_with_a_conductance_weighted_proxy():
+    """Beyond ``latent_depth`` an unmeasured zone enters as a boundary node at the
+    conductance-weighted mean of its measured and boundary neighbours."""
+    import pandas as pd
+    spec = _chain_spec()
+    full = local_problems(spec, zones=["A"], latent_depth=None)[0]
+    p = local_problems(spec, zones=["A"], latent_depth=1)[0]
+    assert set(full.latent) == {"H1", "H2"} and p.latent == ["H1"]
+    assert p.n_states == full.n_states - 1 - 2 * 2      # H2 and two of its walls go
+    w = dict(dict(p.aggregates)["H2~proxy"])
+    # conductances 1/ΣR: B 25, C 12.5, out 2.5 W/K
+    assert w == pytest.approx({"B": 25.0, "C": 12.5, "out": 2.5})
+    assert "H2~proxy" in p.spec.boundary
+    assert any({"H1", "H2~proxy"} == {wl.a, wl.b} for wl in p.spec.walls)
+    f = pd.DataFrame({"T:A": [20.0, 21.0], "T:B": [22.0, 22.0], "T:C": [18.0, np.nan],
+                      "T:out": [0.0, 0.0]})
+    got = p.data(f)["T:H2~proxy"].to_numpy()
+    assert got[0] == pytest.approx((25 * 22 + 12.5 * 18 + 2.5 * 0) / 40.0)
+    assert got[1] == pytest.approx((25 * 22 + 2.5 * 0) / 27.5)     # C's gap renormalised
+    ThermalNetwork(p.spec, p.candidates)

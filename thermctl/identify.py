@@ -112,6 +112,9 @@ class IdentifyOptions:
         ``scale="local"``: refit the selected structure on the whole building (one shared
         R̄_v, intervals) when its model has at most this many states; above, the model
         keeps the local per-edge R̄_v.
+    latent_depth : int or None
+        ``scale="local"``: unmeasured zones a local problem holds, counted in hops through
+        unmeasured zones; beyond, a steady-state proxy (:func:`thermctl.local.local_problems`).
     """
 
     criterion: str = "likelihood"
@@ -139,6 +142,7 @@ class IdentifyOptions:
     scheduler: str | None = None
     local_rows: str = "all"
     refit_max_states: int = 150
+    latent_depth: int | None = 1
 
     def check(self):
         for name, allowed in (("criterion", CRITERIA), ("selection", SELECTIONS),
@@ -157,6 +161,9 @@ class IdentifyOptions:
             raise DataError("identify: scale='local' needs selection='model' with a grey-box "
                             "criterion; the paper's pipeline (--criterion simulation or "
                             "--selection scores) has no local form yet")
+        if self.latent_depth is not None and self.latent_depth < 1:
+            raise DataError(f"identify option latent_depth must be >= 1 or None, found "
+                            f"{self.latent_depth}")
         if self.workers is not None and self.workers < 1:
             raise DataError(f"identify option workers must be >= 1, found {self.workers}")
 
@@ -390,7 +397,7 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     li = identify_local(meas.spec, cal.frame, rule=opt.combine, criterion=opt.selection_criterion,
                         margin=opt.margin, solar=opt.solar, workers=opt.workers,
                         client=client or opt.scheduler, progress=progress,
-                        fit_rows=opt.local_rows)
+                        fit_rows=opt.local_rows, latent_depth=opt.latent_depth)
     return _finish_local(meas, cal, val, opt, li, progress)
 
 
@@ -492,7 +499,8 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         problems, frames, owner = [], [], []
         for k in local:
             cal = splits[k][0]
-            ps = local_problems(items[k].spec, cal.frame.columns)
+            ps = local_problems(items[k].spec, cal.frame.columns,
+                                latent_depth=opt.latent_depth)
             problems += ps
             frames += [cal.frame] * len(ps)
             owner += [k] * len(ps)

@@ -123,7 +123,8 @@ def _pair_name(a, b) -> str:
 
 
 def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool = True,
-                   aggregate: bool = True, unmeasured: bool = False) -> list[LocalProblem]:
+                   aggregate: bool = True, unmeasured: bool = False,
+                   latent_depth: int | None = 1) -> list[LocalProblem]:
     """Split a building into one local problem per measured zone.
 
     Parameters
@@ -146,6 +147,16 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         Merge a latent zone's walls to measured zones outside the problem into one wall per
         construction, exactly (see :func:`_aggregate_far_walls`); keeps a hallway's local
         problems small whatever the length of the hallway.
+    latent_depth : int or None
+        How many unmeasured zones deep a problem reaches (``None``: every unmeasured zone
+        connected through unmeasured zones). Beyond it, an unmeasured zone ``u`` becomes a
+        boundary node at its *steady-state proxy*: the conductance-weighted mean of the
+        measured zones and boundary nodes its walls join (:func:`_proxy_members`). On a
+        tall corridor building the hallways chain through the floor slabs, so without a
+        bound every problem holds every hallway (73–75 states at 196 zones instead of
+        ~45); with depth 1 the floor above's hallway enters through the offices around it.
+        An approximation (the proxy misses the hallway's own dynamics, time constants of
+        hours behind a slab), where the aggregated walls are exact.
 
     Returns
     -------
@@ -166,21 +177,26 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
     for z in (spec.measured_zones if zones is None else zones):
         if z not in meas:
             raise DataError(f"local problem: {z!r} is not a measured zone of {spec.source}")
-        # latent closure: unmeasured zones reachable through unmeasured zones
-        local, stack = {z}, [z]
-        while stack:
-            n = stack.pop()
-            for m in touching.get(n, ()):
-                if m in zone_set and m not in meas and m not in local:
-                    local.add(m)
-                    stack.append(m)
+        # latent closure: unmeasured zones reachable through unmeasured zones, breadth
+        # first up to latent_depth
+        local, frontier, depth = {z}, [z], 0
+        while frontier and (latent_depth is None or depth < latent_depth):
+            nxt = []
+            for n in frontier:
+                for m in sorted(touching.get(n, ())):
+                    if m in zone_set and m not in meas and m not in local:
+                        local.add(m)
+                        nxt.append(m)
+            frontier, depth = nxt, depth + 1
         zones_l = [zz for zz in spec.zones if zz.name in local]
-        walls = [w for w in spec.walls if w.a in local or w.b in local]
+        walls, proxies = _proxy_walls(spec, [w for w in spec.walls
+                                             if w.a in local or w.b in local], local, meas)
         cands = [(c.a, c.b, c.d) for c in allc if z in c.pair]
         walls, aggregates = _aggregate_far_walls(walls, local, z, meas) \
             if aggregate else (walls, [])
         nodes = {w.a for w in walls} | {w.b for w in walls}
         nodes |= {n for a, b, _ in cands for n in (a, b)}
+        aggregates = aggregates + proxies
         agg_nodes = [n for n, _ in aggregates]
         bnd = [b for b in spec.boundary if b in nodes]
         bnd += [m for m in spec.zone_names if m in nodes and m not in local]
@@ -200,6 +216,45 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
                                                             if c.startswith("solar:"))
         out.append(LocalProblem(z, sub, tuple(cands), tuple(cols), tuple(aggregates)))
     return out
+
+
+def _proxy_members(spec, u, meas):
+    """``((node, weight), ...)``: the measured zones and boundary nodes joined to the
+    unmeasured zone ``u`` by walls, weighted by the walls' conductance ``1/ΣR`` [W/K] — the
+    temperature ``u`` would settle at if those were its only neighbours."""
+    w = {}
+    for wall in spec.walls:
+        if u not in (wall.a, wall.b):
+            continue
+        other = wall.b if wall.a == u else wall.a
+        if other in meas or other in spec.boundary:
+            w[other] = w.get(other, 0.0) + 1.0 / sum(wall.R)
+    return tuple(sorted(w.items()))
+
+
+def _proxy_walls(spec, walls, local, meas):
+    """Walls to unmeasured zones outside the problem end at a proxy boundary node
+    ``<u>~proxy`` instead (see ``latent_depth`` of :func:`local_problems`)."""
+    from dataclasses import replace
+    out, proxies = [], {}
+    for w in walls:
+        ends = [n for n in (w.a, w.b) if n not in local and n not in spec.boundary
+                and n not in meas]
+        if not ends:
+            out.append(w)
+            continue
+        u = ends[0]
+        if u not in proxies:
+            members = _proxy_members(spec, u, meas)
+            if not members:
+                log.warning("unmeasured zone %s beyond the latent depth touches no measured "
+                            "node: its walls into the problem are left out", u)
+            proxies[u] = members
+        if not proxies[u]:
+            continue
+        node = f"{u}~proxy"
+        out.append(replace(w, a=node) if w.a == u else replace(w, b=node))
+    return out, [(f"{u}~proxy", m) for u, m in proxies.items() if m]
 
 
 def _wall_shape(w):
@@ -612,7 +667,7 @@ class LocalIdentification:
 def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: str = "bic",
                    margin: float = 10.0, solar: bool = True, workers: int | None = None,
                    client=None, progress=None, parallel: bool = True,
-                   fit_rows: str = "all") -> LocalIdentification:
+                   fit_rows: str = "all", latent_depth: int | None = 1) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -636,6 +691,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         Air paths beside walls are candidates.
     fit_rows : {"all", "auto", "supply_off"}
         Samples of the local likelihoods (:func:`fit_local`).
+    latent_depth : int or None
+        Unmeasured zones deep a problem reaches (:func:`local_problems`).
 
     Returns
     -------
@@ -648,7 +705,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     >>> print(li.summary())                                  # doctest: +SKIP
     """
     t0 = time.perf_counter()
-    problems = local_problems(spec, frame.columns, parallel=parallel)
+    problems = local_problems(spec, frame.columns, parallel=parallel, latent_depth=latent_depth)
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
                         criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows)
     return assemble(problems, results, rule, margin, time.perf_counter() - t0)
