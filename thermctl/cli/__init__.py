@@ -56,7 +56,7 @@ def _root(
 
 
 # Command modules register themselves on `app` when imported.
-from . import export, info, pipeline, reduce  # noqa: E402,F401
+from . import export, info, pipeline, reduce, spec  # noqa: E402,F401
 
 try:  # optional command modules, added as the features land
     from . import testbed  # noqa: F401

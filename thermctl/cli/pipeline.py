@@ -115,6 +115,8 @@ def identify(
     local_rows: str = typer.Option(_IDENT_DEFAULTS.local_rows, help="Local problems: samples of "
                                    "the local likelihoods: all, auto (supply-off hours when "
                                    "there are enough, as the whole-building fit) or supply_off."),
+    columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
+                                 "column), e.g. from `thermctl spec from-brick`."),
 ):
     """Identify convection edges and their parameters; write model.json, identification.json, figures.
 
@@ -134,7 +136,12 @@ def identify(
     t0 = time.perf_counter()
     _check_not_swapped(data, building)
     spec = load_spec(building)
-    meas = _read_data(data, spec, units, gap_limit=gap_limit)
+    if columns is not None:
+        from ..brick import load_column_map, read_mapped_table
+        meas = _read_data(read_mapped_table(data, load_column_map(columns), read_options.sep),
+                          spec, units, gap_limit=gap_limit, name=str(data))
+    else:
+        meas = _read_data(data, spec, units, gap_limit=gap_limit)
     console.print(meas.quality.summary(), highlight=False)
     opt = IdentifyOptions(criterion=criterion, selection=selection, candidates=candidates,
                           margin=margin, selection_criterion=selection_criterion, solar=solar,
