@@ -27,7 +27,8 @@ import numpy as np
 import pandas as pd
 
 from thermctl.errors import BoundWarning
-from thermctl.estimate import CostProblem, EstimationData, fit, grid_search
+from thermctl.estimate import EstimationData
+from thermctl.estimate.simulation import CostProblem, fit, grid_search
 from thermctl.testbed import generate
 
 

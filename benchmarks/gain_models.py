@@ -4,7 +4,7 @@ Issue 11 asks to compare the ways of giving each zone its unknown heat gain (peo
 equipment, sun): a random-walk state per zone (the offset-free disturbance model of MPC),
 occupied/unoccupied levels, a small time-of-day Fourier basis, and combinations. For each
 Pugh-Hall testbed building (3 seeds, 14 days, closed loop, true air paths given) this fits
-:class:`thermctl.greybox.GreyboxEstimator` with each gain model and prints the R̄_v error,
+:class:`thermctl.estimate.likelihood.LikelihoodEstimator` with each gain model and prints the R̄_v error,
 whether the 90 % Wald interval covers the truth, the BIC, the 1-h k-step RMSE on the last
 two (held-back) days, and the time.
 
@@ -23,12 +23,12 @@ import warnings
 import numpy as np
 
 from thermctl.data import read_measurements
-from thermctl.greybox import GreyboxEstimator, kstep_errors
-from thermctl.greybox.uncertainty import wald_intervals
+from thermctl.estimate.likelihood import LikelihoodEstimator, kstep_errors
+from thermctl.estimate.likelihood.uncertainty import wald_intervals
 from thermctl.testbed import generate
 
 GAIN_MODELS = {
-    # name: GreyboxOptions fields
+    # name: LikelihoodOptions fields
     "none (white noise only)": dict(disturbance="none"),
     "levels (occupied/unoccupied)": dict(disturbance="none", basis="levels"),
     "fourier (2 harmonics)": dict(disturbance="none", basis="fourier"),
@@ -54,7 +54,7 @@ def main(argv=None):
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    est = GreyboxEstimator(tb.network, **kw).fit(cal)
+                    est = LikelihoodEstimator(tb.network, **kw).fit(cal)
                     wald, _ = wald_intervals(est.problem_, est.eta_, 0.9)
                 iv = wald["rbar_v"]
                 ks = kstep_errors(est.problem_for(val), est.eta_, horizons=(3600.0,))

@@ -19,7 +19,7 @@ model-based (BIC)         forward/backward selection on the Kalman likelihood, a
                           pairs with a known distance or a wall (a door beside it), BIC
                           margin 10
 SIN + model-based         backward elimination by BIC from the SIN picks (walls allowed):
-                          ``select_edges(candidates="sin", direction="backward")``
+                          ``select_air_paths(candidates="sin", direction="backward")``
 conduction only           no air path (the reference every air-path model must beat)
 ========================  ====================================================================
 
@@ -27,9 +27,9 @@ conduction only           no air path (the reference every air-path model must b
 criterion                 fit of R̄_v (and C_v)
 ========================  ====================================================================
 simulation (paper)        open-loop simulation error over 12 h, gains taken as zero
-                          (:class:`thermctl.estimate.ConvectionEstimator`, the paper's J)
+                          (:class:`thermctl.estimate.SimulationEstimator`, the paper's J)
 Kalman                    maximum likelihood through a Kalman filter with random-walk gains
-                          (:class:`thermctl.greybox.GreyboxEstimator`, default rows: samples
+                          (:class:`thermctl.estimate.likelihood.LikelihoodEstimator`, default rows: samples
                           with the supply off ≥ 3 h)
 Kalman, all rows          the same on every sample
 k-step 1 h                1-hour-ahead prediction error from filtered states
@@ -80,8 +80,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from thermctl.greybox import GreyboxData, GreyboxEstimator, identifiability
-from thermctl.greybox.selection import select_edges
+from thermctl.estimate import EstimationData
+from thermctl.estimate.likelihood import LikelihoodEstimator, identifiability
+from thermctl.selection import select_air_paths
 from thermctl.model import ThermalModel
 from thermctl.spec import spec_from_dict
 from thermctl.testbed import generate, pugh_hall_spec
@@ -199,7 +200,7 @@ class Validator:
 
     def __init__(self, tb, frame):
         net = tb.network
-        gd = GreyboxData.from_measurements(frame, net)   # no Q: columns → Q = 0 (gains unknown)
+        gd = EstimationData.from_frame(frame, net)   # no Q: columns → Q = 0 (gains unknown)
         self.dt = gd.dt
         self.U = gd.U[:-1]
         self.Y = np.full((len(gd), net.n_zones), np.nan)
@@ -307,11 +308,11 @@ def run_building(name, kwargs, seed, days, *, selection=True, paper=True, verbos
         if not network.convection_edges and criterion == SIM:
             return ThermalModel(network), None      # nothing to estimate
         if criterion == SIM:
-            from thermctl.estimate import ConvectionEstimator
-            est = ConvectionEstimator(identifiability=False).fit(network, cal)
+            from thermctl.estimate import SimulationEstimator
+            est = SimulationEstimator(network, identifiability=False).fit(cal)
             return est.model_, est
         kw = {KAL: {}, KAL_ALL: {"fit_rows": "all"}, KSTEP: {"criterion": "kstep"}}[criterion]
-        est = GreyboxEstimator(network, **kw).fit(cal)
+        est = LikelihoodEstimator(network, **kw).fit(cal)
         return est.model_, est
 
     def row(method, criterion, work):
@@ -359,7 +360,7 @@ def run_building(name, kwargs, seed, days, *, selection=True, paper=True, verbos
     if selection:
         def select(**kw):
             def work():
-                sel = select_edges(tb.spec, cal, **kw)
+                sel = select_air_paths(tb.spec, cal, **kw)
                 found = {tuple(sorted(e[:2])) for e in sel.edges}
                 return sel.estimator.model_, sel.estimator, found, f" {sel.n_fits} fits;"
             return work

@@ -13,7 +13,7 @@ The script answers, with numbers:
 
 1. ``thermctl identify`` as a user runs it (default options, the paper's pipeline, with
    ``--allow-parallel``): does it run, what does it select, how long does it take.
-2. Model-based selection (:func:`thermctl.greybox.selection.select_edges`, BIC on the
+2. Model-based selection (:func:`thermctl.selection.select_air_paths`, BIC on the
    Kalman likelihood, forward) over ALL 21 zone pairs, including the pairs that share a
    wall, with air path lengths from the spec's geometry (see :func:`door_hops`): the
    order, the BIC change of each step, R̄_v and the equivalent conductance per edge.
@@ -54,9 +54,9 @@ import numpy as np
 import pandas as pd
 
 from thermctl.data import read_measurements
-from thermctl.greybox import GreyboxEstimator, kstep_errors
-from thermctl.greybox.kstep import filtered_states
-from thermctl.greybox.selection import select_edges
+from thermctl.estimate.likelihood import LikelihoodEstimator, kstep_errors
+from thermctl.estimate.likelihood.kstep import filtered_states
+from thermctl.selection import select_air_paths
 from thermctl.model import ThermalModel
 from thermctl.network import ThermalNetwork
 from thermctl.spec import load_spec
@@ -263,7 +263,7 @@ def fit(net, data, label, times, **kw):
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        est = GreyboxEstimator(net, **kw).fit(data)
+        est = LikelihoodEstimator(net, **kw).fit(data)
     times[label] = time.perf_counter() - t0
     est.warnings_ = [f"{w.category.__name__}: {w.message}" for w in caught]
     return est
@@ -279,7 +279,7 @@ def conductances(est, net):
 def predict_from_filter(pb, eta, start_rows, H):
     """H-step prediction from the filtered state at each start row, no further updates.
 
-    The same propagation as :func:`thermctl.greybox.kstep_errors` (gains held at their
+    The same propagation as :func:`thermctl.estimate.likelihood.kstep_errors` (gains held at their
     filtered value, solar and measured inputs applied, supply heat from the predicted
     temperature), but returning every step so that the RMSE over a whole 48-h
     trajectory can be taken.
@@ -318,7 +318,7 @@ def main(argv=None):
     ap.add_argument("--nosolar-edges", type=int, default=0,
                     help="forward selection steps without solar (for the comparison of the order)")
     ap.add_argument("--screen", choices=("grid", "fit"), default="grid",
-                    help="select_edges screening (grid: 3 R̄_v values per candidate; fit: a 1-D fit each, slower)")
+                    help="select_air_paths screening (grid: 3 R̄_v values per candidate; fit: a 1-D fit each, slower)")
     ap.add_argument("--no-cli", action="store_true", help="skip the thermctl identify runs")
     ap.add_argument("--cli-timeout", type=float, default=1500.0, help="per CLI run [s]")
     args = ap.parse_args(argv)
@@ -429,14 +429,14 @@ def main(argv=None):
 
     # ---------------------------------------------------------------- selection with solar
     section("3. Model-based selection over all 21 pairs (BIC on the Kalman likelihood, solar apertures on)")
-    print("select_edges(spec, calibration, candidates=<21 (a, b, d)>, criterion='bic', "
+    print("select_air_paths(spec, calibration, candidates=<21 (a, b, d)>, criterion='bic', "
           f"direction='forward', max_edges={args.max_edges}, final_per_edge=True, solar='auto', "
           f"screen='{args.screen}'); "
           "one R̄_v per edge, τ0 shared; margin 10.")
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        sel = select_edges(spec, cal, candidates=cands, criterion="bic", direction="forward",
+        sel = select_air_paths(spec, cal, candidates=cands, criterion="bic", direction="forward",
                            max_edges=args.max_edges, final_per_edge=True, solar="auto",
                            screen=args.screen, progress=lambda m: say(f"selection (solar): {m}"))
     times["selection with solar"] = time.perf_counter() - t0
@@ -445,7 +445,7 @@ def main(argv=None):
     net_sel = ThermalNetwork(spec, sel.edges)
     est_s = sel.estimator
     est_s.warnings_ = []
-    times["  of which final per-edge fit"] = est_s.fit_time_
+    times["  of which final per-edge fit"] = est_s.wall_time_
 
     # ---------------------------------------------------------------- fits for comparison
     net0 = ThermalNetwork(spec, ())
@@ -456,7 +456,7 @@ def main(argv=None):
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        est_n = GreyboxEstimator(net_sel, per_edge=True, solar=False).fit(cal, init=init)
+        est_n = LikelihoodEstimator(net_sel, per_edge=True, solar=False).fit(cal, init=init)
     times["selected structure, no solar"] = time.perf_counter() - t0
     est_n.warnings_ = [f"{w.category.__name__}: {w.message}" for w in caught]
 
@@ -476,7 +476,7 @@ def main(argv=None):
     print(f"τ0 = R̄_v·C_v = {tau:.3g} s/m (bounds {est_s.problem_.tau_bounds[0]:.3g}–"
           f"{est_s.problem_.tau_bounds[1]:.3g}); without solar {est_n.params_.get('tau0', float('nan')):.3g} s/m.")
     for lab, e_ in (("solar", est_s), ("no solar", est_n)):
-        phys = [b for b in e_.result_.at_bounds if b.startswith(("rbar_v", "tau0"))]
+        phys = [b for b in e_.result_.active_bounds if b.startswith(("rbar_v", "tau0"))]
         if phys:
             print(f"  at a bound ({lab}): " + "; ".join(phys))
     n_open = sum(frozenset((e.a, e.b)) in OPEN for e in net_sel.convection_edges)
@@ -490,7 +490,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            sel_n = select_edges(spec, cal, candidates=cands, criterion="bic", direction="forward",
+            sel_n = select_air_paths(spec, cal, candidates=cands, criterion="bic", direction="forward",
                                  max_edges=args.nosolar_edges, final_per_edge=True, solar=False,
                                  screen=args.screen, progress=lambda m: say(f"selection (no solar): {m}"))
         times["selection without solar"] = time.perf_counter() - t0
@@ -508,7 +508,7 @@ def main(argv=None):
                  "σ_v [K]", "σ_φ [W/√s]", "fit [s]"],
                 [(n, str(len(e.problem_.edges)), str(e.n_free_), f"{e.nll_:.1f}", f"{e.bic_:.1f}",
                   f"{e.bic_ - base:+.1f}", f"{e.params_.get('sigma_v', float('nan')):.3f}",
-                  f"{e.params_.get('sigma_phi', float('nan')):.3f}", f"{e.fit_time_:.0f}")
+                  f"{e.params_.get('sigma_phi', float('nan')):.3f}", f"{e.wall_time_:.0f}")
                  for n, e in models]))
     sol_names = est_s.problem_.data.solar_names
     print("\nSolar apertures [m²] (W per W/m² of the column; lower bound 0; blank = 0):")
@@ -630,7 +630,7 @@ def main(argv=None):
             say(f"prefix fit: {k} edge(s)")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                e = GreyboxEstimator(net_k, per_edge=True, solar="auto").fit(cal, init=init_k)
+                e = LikelihoodEstimator(net_k, per_edge=True, solar="auto").fit(cal, init=init_k)
         r = kstep_errors(e.problem_for(val), e.eta_, horizons=[3600.0 * h for h in KSTEP_H],
                          stride=3600.0)
         Gk = step_response_matrix(e.model_, ms_min, HORIZONS_H)[1, :, i_liv] * Pm / 100
@@ -668,7 +668,7 @@ def main(argv=None):
         say(f"capacity ×{mult:g}")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            e = est0_n if mult == 1.0 else GreyboxEstimator(ThermalNetwork(sp, ()), solar=False).fit(cal)
+            e = est0_n if mult == 1.0 else LikelihoodEstimator(ThermalNetwork(sp, ()), solar=False).fit(cal)
         rows.append((f"×{mult:g}", f"{e.bic_:.0f}", f"{e.bic_ - est0_n.bic_:+.0f}"))
     times["capacity diagnostic"] = time.perf_counter() - t0
     print(table(["capacity_multiplier", "BIC conduction-only, no solar", "ΔBIC"], rows))

@@ -15,9 +15,10 @@ import pandas as pd
 import pytest
 
 from thermctl.errors import (BoundWarning, ConvergenceWarning, DataError, EstimationError)
-from thermctl.estimate import (ConvectionEstimator, CostProblem, EstimationData,
-                               CasadiMultipleShootingNLP, fit, grid_search)
-from thermctl.estimate.nlp import radau_substeps
+from thermctl.estimate import EstimationData
+from thermctl.estimate.simulation import (CasadiMultipleShootingNLP, CostProblem,
+                                          SimulationEstimator, fit, grid_search)
+from thermctl.estimate.simulation.nlp import radau_substeps
 from thermctl.model import ThermalModel
 from thermctl.network import ThermalNetwork
 from thermctl.spec import spec_from_dict
@@ -455,9 +456,9 @@ def test_from_frame_missing_column(noisy, drop, match):
 def test_estimator_and_progress(noisy):
     net, data, X = noisy
     calls = []
-    est = ConvectionEstimator(initial_state="estimate", identifiability=False,
+    est = SimulationEstimator(net, initial_state="estimate", identifiability=False,
                               progress=lambda stage, done, total: calls.append(stage))
-    assert est.fit(net, data) is est
+    assert est.fit(data) is est
     assert abs(est.rbar_v_ / RBAR - 1) < 0.05
     np.testing.assert_allclose(est.model_.p, est.problem_.p(est.result_.eta))
     assert {"warm start", "ipopt"} <= set(calls)

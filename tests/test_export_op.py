@@ -130,7 +130,7 @@ def test_no_data_says_loudly_that_flow_is_zero(model_json, tmp_path):
 # ------------------------------------------------------------------ item 4: disturbances, Kalman filter
 def test_disturbance_inputs_and_kalman_filter_exported(model_json, data_csv, tmp_path,
                                                        small_network):
-    from thermctl.greybox.kalman import discretize_np
+    from thermctl.estimate.likelihood.kalman import discretize_np
 
     res = run("export", model_json, "--statespace", tmp_path / "ss.npz", "--data", data_csv,
               "--dt", 600, "--casadi", tmp_path / "f.casadi")
@@ -213,7 +213,7 @@ def test_docs_config_math_api_and_pages():
     nav = json.dumps(cfg["nav"])
     assert "operating-point.md" in nav
     api = (ROOT / "docs" / "api.md").read_text()
-    for obj in ("thermctl.reduce", "GreyboxEstimator", "select_edges", "thermctl.export"):
+    for obj in ("thermctl.reduce", "LikelihoodEstimator", "select_air_paths", "thermctl.export"):
         assert obj in api, f"docs/api.md lacks {obj}"
     cli = (ROOT / "docs" / "cli.md").read_text()
     out = cli[cli.index("## Output files"):]
@@ -244,4 +244,4 @@ def test_rendered_docs_have_math_and_no_raw_sphinx_roles(tmp_path):
     raw = re.findall(r":(?:func|meth|class|attr|mod|math|data|exc):<code>", api)
     assert not raw, f"raw Sphinx roles on the API page: {raw[:5]}"
     assert ".. math::" not in api and 'class="arithmatex"' in api
-    assert "GreyboxEstimator" in api and "select_edges" in api and "balanced_reduction" in api
+    assert "LikelihoodEstimator" in api and "select_air_paths" in api and "balanced_reduction" in api

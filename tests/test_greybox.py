@@ -1,4 +1,4 @@
-"""Tests of the stochastic grey-box estimator (thermctl.greybox).
+"""Tests of the stochastic grey-box estimator (thermctl.estimate.likelihood).
 
 Oracles: scipy's matrix exponential and DARE solver, a modal formula for the process
 noise, a dense Gaussian log-density of the stacked outputs, finite differences, and
@@ -19,11 +19,13 @@ import scipy.linalg as sla
 from scipy.stats import multivariate_normal
 
 from thermctl.errors import DataError, EstimationError
-from thermctl.greybox import (GreyboxData, GreyboxEstimator, GreyboxOptions, GreyboxProblem,
+from thermctl.estimate import EstimationData
+from thermctl.estimate.likelihood import (LikelihoodEstimator, LikelihoodOptions, LikelihoodProblem,
                               identifiability, kstep_errors)
-from thermctl.greybox import kalman
-from thermctl.greybox.selection import candidate_pairs, select_edges
-from thermctl.greybox.uncertainty import hessian_fd, wald_intervals
+from thermctl.estimate.likelihood import kalman
+from thermctl.selection import select_air_paths
+from thermctl.structure.search import candidate_pairs
+from thermctl.estimate.likelihood.uncertainty import hessian_fd, wald_intervals
 from thermctl.network import ThermalNetwork
 from thermctl.spec import spec_from_dict
 
@@ -48,7 +50,7 @@ def _placeholder_data(net, n):
     U = np.zeros((n, net.n_inputs))
     U[:, net.input_slices()["T"]] = 10.0
     Y = np.full((n, len(net.measured_zones)), 21.0)
-    return GreyboxData.from_arrays(net, U, Y, DT)
+    return EstimationData.from_arrays(net, U, Y, DT)
 
 
 def simulate_self_consistent(net, days, seed, truth=None, sv=0.03):
@@ -58,9 +60,9 @@ def simulate_self_consistent(net, days, seed, truth=None, sv=0.03):
     random-walk gains in every measured zone, white heat noise, outdoor temperature with
     a daily cycle, sensor noise ``sv`` [K].
     """
-    opts = GreyboxOptions(supply_temperature="start", fit_rows="all", burn_in=3 * 3600)
+    opts = LikelihoodOptions(supply_temperature="start", fit_rows="all", burn_in=3 * 3600)
     N = int(days * 86400 / DT)
-    pb0 = GreyboxProblem(net, _placeholder_data(net, 400), opts)
+    pb0 = LikelihoodProblem(net, _placeholder_data(net, 400), opts)
     truth = truth or {"sigma_v": sv, "sigma_q": 100.0, "sigma_phi": 1.5, "tau0": 1.0}
     if pb0.edges:
         truth = {**truth, **({"rbar_v": RBAR_TRUE} if "rbar_v" in pb0.layout.names else
@@ -93,7 +95,7 @@ def simulate_self_consistent(net, days, seed, truth=None, sv=0.03):
         heat[meas] = u[meas] * cp * (u[sl["Ts"]][meas] - Y[k])
         w = np.r_[heat * 1e-3, u[sl["T"]]]
         x = m["Phi"] @ x + m["Gamma"] @ w + Lq @ rng.normal(size=pb0.n)
-    return GreyboxData.from_arrays(net, U, Y, DT), opts
+    return EstimationData.from_arrays(net, U, Y, DT), opts
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +112,7 @@ def sim5(net5):
 
 # ---------------------------------------------------------------------------- discretisation
 def _stiff_system(net5):
-    pb = GreyboxProblem(net5, _placeholder_data(net5, 300), GreyboxOptions(fit_rows="all"))
+    pb = LikelihoodProblem(net5, _placeholder_data(net5, 300), LikelihoodOptions(fit_rows="all"))
     m = pb.matrices(pb.layout.eta0())
     return pb, m
 
@@ -178,7 +180,7 @@ def test_kalman_nll_equals_dense_gaussian_log_density():
 
 def test_problem_likelihood_equals_time_varying_filter(sim5, net5):
     data, opts = sim5
-    pb = GreyboxProblem(net5, data, opts)
+    pb = LikelihoodProblem(net5, data, opts)
     eta = pb.layout.eta0()
     m = pb.matrices(eta)
     a, b = pb.segments[0]
@@ -203,7 +205,7 @@ def test_gradient_matches_finite_differences(sim5, net5, extra):
     data.time = pd.date_range("2024-01-15", periods=len(data), freq="5min", tz="UTC")
     data.solar = np.clip(np.sin(np.arange(len(data)) * 2 * np.pi / 288), 0, None)[:, None] * 400
     data.solar_names = ["south"]
-    pb = GreyboxProblem(net5, data, GreyboxOptions(**{**opts.__dict__, **extra}))
+    pb = LikelihoodProblem(net5, data, LikelihoodOptions(**{**opts.__dict__, **extra}))
     rng = np.random.default_rng(3)
     eta = pb.layout.eta0() + rng.uniform(-0.3, 0.3, len(pb.layout))
     f, g = pb.nll_grad(eta)
@@ -227,7 +229,7 @@ def test_gradient_matches_finite_differences(sim5, net5, extra):
 
 def test_block_scores_sum_to_gradient(sim5, net5):
     data, opts = sim5
-    pb = GreyboxProblem(net5, data, opts)
+    pb = LikelihoodProblem(net5, data, opts)
     eta = pb.layout.eta0()
     G = pb.block_scores(eta, block=86400.0)
     assert G.shape[0] == 4                   # four days, each with observations
@@ -237,7 +239,7 @@ def test_block_scores_sum_to_gradient(sim5, net5):
 # ---------------------------------------------------------------------------- estimation
 def test_recovery_self_consistent_closed_loop(sim5, net5):
     data, opts = sim5
-    est = GreyboxEstimator(net5, options=opts).fit(data)
+    est = LikelihoodEstimator(net5, options=opts).fit(data)
     # 4 days of closed-loop data with 0.03 K sensor noise: the profile interval in the
     # benchmark is about ±15 %; 20 % is a 2-sigma-ish margin for this seed
     assert est.rbar_v_ == pytest.approx(RBAR_TRUE, rel=0.2)
@@ -246,14 +248,14 @@ def test_recovery_self_consistent_closed_loop(sim5, net5):
     assert est.result_.success
     assert est.model_.network is net5
     # the two solvers reach the same optimum
-    est2 = GreyboxEstimator(net5, options=opts, solver="ipopt").fit(data)
+    est2 = LikelihoodEstimator(net5, options=opts, solver="ipopt").fit(data)
     assert est2.nll_ == pytest.approx(est.nll_, abs=1e-3)
     assert est2.rbar_v_ == pytest.approx(est.rbar_v_, rel=1e-3)
 
 
 def test_wald_intervals_and_c_v_verdict(sim5, net5):
     data, opts = sim5
-    est = GreyboxEstimator(net5, options=opts).fit(data)
+    est = LikelihoodEstimator(net5, options=opts).fit(data)
     rep = identifiability(est, method="wald")
     iv = rep.intervals["rbar_v"]
     assert iv.identifiable and iv.lower < est.rbar_v_ < iv.upper
@@ -268,9 +270,9 @@ def test_wald_intervals_and_c_v_verdict(sim5, net5):
 
 
 def test_profile_interval_agrees_with_wald(sim5, net5):
-    from thermctl.greybox.uncertainty import profile_likelihood
+    from thermctl.estimate.likelihood.uncertainty import profile_likelihood
     data, opts = sim5
-    est = GreyboxEstimator(net5, options=opts).fit(data)
+    est = LikelihoodEstimator(net5, options=opts).fit(data)
     wald, _ = wald_intervals(est.problem_, est.eta_, 0.9, robust=False)
     prof = profile_likelihood(est.problem_, est.eta_, "rbar_v", 0.9, nll_hat=est.nll_)
     assert prof.identifiable
@@ -285,7 +287,7 @@ def test_profile_interval_agrees_with_wald(sim5, net5):
 
 def test_kstep_errors_grow_with_horizon(sim5, net5):
     data, opts = sim5
-    est = GreyboxEstimator(net5, options=opts).fit(data)
+    est = LikelihoodEstimator(net5, options=opts).fit(data)
     ks = kstep_errors(est.problem_, est.eta_, horizons=(300.0, 3600.0, 6 * 3600.0))
     assert ks.rmse.shape == (3, 3)
     assert np.all(np.diff(ks.rmse_mean) > 0)
@@ -298,7 +300,7 @@ def test_selection_keeps_true_edge_and_rejects_spurious(spec5, net5):
     cands = candidate_pairs(spec5)
     # r1-r2 has a wall: a candidate parallel to it must be offered
     assert any(c.pair == ("r1", "r2") and c.parallel for c in cands)
-    res = select_edges(spec5, data, candidates=[("r1", "r3"), ("r2", "r3"), ("r1", "r2")],
+    res = select_air_paths(spec5, data, candidates=[("r1", "r3"), ("r2", "r3"), ("r1", "r2")],
                        options=opts)
     assert [e[:2] for e in res.edges] == [("r2", "r3")]
     assert res.reasons["air:r2-r3"].startswith("added")
@@ -322,24 +324,24 @@ def test_selection_keeps_true_edge_and_rejects_spurious(spec5, net5):
 def test_errors_name_the_problem(sim5, net5, kwargs, exc, match):
     data, _ = sim5
     with pytest.raises(exc, match=match):
-        GreyboxEstimator(net5, **kwargs).fit(data)
+        LikelihoodEstimator(net5, **kwargs).fit(data)
 
 
 def test_data_checks(net5):
     n = 10
     U = np.zeros((n, net5.n_inputs))
     with pytest.raises(DataError, match="U has 10 rows but Y has 9"):
-        GreyboxData.from_arrays(net5, U, np.zeros((9, 3)), DT)
+        EstimationData.from_arrays(net5, U, np.zeros((9, 3)), DT)
     with pytest.raises(DataError, match="3 zones were named"):
-        GreyboxData.from_arrays(net5, U, np.zeros((n, 2)), DT)
-    data = GreyboxData.from_arrays(net5, U, np.r_[np.zeros((4, 3)), np.full((1, 3), np.nan),
+        EstimationData.from_arrays(net5, U, np.zeros((n, 2)), DT)
+    data = EstimationData.from_arrays(net5, U, np.r_[np.zeros((4, 3)), np.full((1, 3), np.nan),
                                                   np.zeros((5, 3))], DT)
     assert data.segments() == [(0, 4), (5, 10)]
 
 
 def test_unfitted_estimator_says_so(net5, sim5):
     with pytest.raises(EstimationError, match="not fitted"):
-        GreyboxEstimator(net5).score(sim5[0])
+        LikelihoodEstimator(net5).score(sim5[0])
 
 
 # ---------------------------------------------------------------------------- testbed (slow)
@@ -350,7 +352,7 @@ def test_recovery_on_testbed_pugh_hall():
     tb = generate("pugh-hall", days=14, seed=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        est = GreyboxEstimator(tb.network).fit(tb.data)
+        est = LikelihoodEstimator(tb.network).fit(tb.data)
     assert est.problem_.fit_rule == "supply_off"
     # measured over seeds in benchmarks/identification.py: median error ~10 %
     assert est.rbar_v_ == pytest.approx(tb.truth.rbar_v, rel=0.25)
@@ -363,7 +365,7 @@ def test_sin_then_likelihood_selection_on_testbed():
     tb = generate("pugh-hall", days=14, seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = select_edges(tb.spec, tb.data, candidates="sin", direction="backward")
+        res = select_air_paths(tb.spec, tb.data, candidates="sin", direction="backward")
     assert {e[:2] for e in res.edges} == {tuple(sorted(e[:2])) for e in tb.truth.edges}
     assert res.estimator.rbar_v_ == pytest.approx(tb.truth.rbar_v, rel=0.25)
 
@@ -371,7 +373,7 @@ def test_sin_then_likelihood_selection_on_testbed():
 def test_verdict_texts_for_one_sided_and_bound_intervals():
     from types import SimpleNamespace
 
-    from thermctl.greybox.uncertainty import ParameterInterval, _cv_verdict, _verdict
+    from thermctl.estimate.likelihood.uncertainty import ParameterInterval, _cv_verdict, _verdict
     # profile closed below by the data, open above: "bounded below only", names the bound
     iv = ParameterInterval("rbar_v", 3e-4, 2e-4, 1e-2, 0.9, "profile", "K/(W m)",
                            closed_lower=True, closed_upper=False)

@@ -11,8 +11,8 @@ import pytest
 
 from thermctl.data import read_measurements
 from thermctl.errors import EstimationError
-from thermctl.greybox import GreyboxOptions, GreyboxProblem
-from thermctl.greybox.estimator import as_greybox_data
+from thermctl.estimate.likelihood import LikelihoodOptions, LikelihoodProblem
+from thermctl.estimate import as_estimation_data
 from thermctl.local import (LocalProblem, LocalResult, combine, fit_local, local_problems,
                             run_local)
 from thermctl.network import ThermalNetwork
@@ -64,8 +64,8 @@ def test_aggregated_far_walls_give_the_same_likelihood(corridor):
     vals = []
     for p in (pa, pe):
         net = ThermalNetwork(p.spec, edge)
-        data = as_greybox_data(p.data(cal), net)
-        pb = GreyboxProblem(net, data, GreyboxOptions(per_edge=True, fit_rows="all"))
+        data = as_estimation_data(p.data(cal), net)
+        pb = LikelihoodProblem(net, data, LikelihoodOptions(per_edge=True, fit_rows="all"))
         vals.append(pb.nll(pb.layout.eta0()))
     assert pa.n_states <= pe.n_states - 2 * (len(pa.aggregates[0][1]) - 1)
     assert vals[0] == pytest.approx(vals[1], rel=1e-9, abs=1e-6)

@@ -65,7 +65,7 @@ def _identification(run_id="run-a"):
                 "path": [{"action": "keep", "edge": None, "value": -49816.3, "delta": 108.7,
                           "note": "removing any edge costs more than the margin 10"}]}},
             "greybox": {"criterion": "likelihood", "params": params, "n_obs": 18000,
-                        "rows": "supply_off", "at_bounds": at_bounds,
+                        "rows": "supply_off", "active_bounds": at_bounds,
                         "intervals": {"rbar_v": {"value": 0.000296, "lower": 0.000262,
                                                  "upper": 0.000338, "level": 0.9, "unit": "K/(W m)",
                                                  "identifiable": True},

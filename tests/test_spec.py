@@ -417,7 +417,7 @@ def test_air_path_length_given_estimated_or_none(small_spec):
 
 
 def test_candidate_pairs_include_wall_pairs_without_length(small_spec):
-    from thermctl.greybox.selection import candidate_pairs
+    from thermctl.structure.search import candidate_pairs
     cands = {c.pair: c for c in candidate_pairs(small_spec)}
     assert cands[("hallway", "r2")].parallel and cands[("hallway", "r2")].unmeasured
     assert cands[("hallway", "r2")].d == pytest.approx(4.2447, abs=1e-4)

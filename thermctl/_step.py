@@ -20,7 +20,7 @@ package uses it:
 * numpy: :func:`radau_stepper` (``make_stepper(..., "radau")`` of :mod:`thermctl.model`,
   ``ThermalModel.simulate``, ``ReducedNetwork.simulate``); :func:`radau_d_matrix`,
   :func:`radau_n`, :func:`radau_forcing` and :func:`radau_tangent` for the sparse
-  simulator with sensitivities of :mod:`thermctl.estimate.radau`;
+  simulator with sensitivities of :mod:`thermctl.estimate.simulation.radau`;
 * CasADi, explicit: :func:`radau_casadi_step` (``ThermalModel.to_casadi().F``,
   ``ReducedNetwork.to_casadi``), a symbolic linear solve with ``D`` per sub-step;
 * CasADi, implicit: :func:`radau_residual`, ``D x⁺ − N x − c`` as equality constraints

@@ -16,8 +16,8 @@ import numpy as np
 from . import __version__
 from .data import MIN_CALIBRATION_DAYS, Measurements
 from .errors import BoundWarning, DataError, EstimationError
-from .model import ThermalModel
-from .network import ThermalNetwork
+from .model import ConvectionParameters, ThermalModel
+from .network import ThermalNetwork, air_path_name
 from .structure import StructureIdentifier
 
 __all__ = ["IdentifyOptions", "Identification", "identify", "identify_many"]
@@ -48,7 +48,7 @@ class IdentifyOptions:
         prediction error from filtered states, or the paper's open-loop simulation error.
     selection : {"model", "scores"}
         ``model``: candidates pruned by an information criterion on the likelihood
-        (:func:`thermctl.greybox.select_edges`); ``scores``: the paper's rule on the SIN
+        (:func:`thermctl.selection.select_air_paths`); ``scores``: the paper's rule on the SIN
         scores alone (forced with ``criterion="simulation"``).
     candidates : {"sin", "sin+pairs", "all"}
         Candidates of the model-based selection: the union of SIN's argmax and threshold
@@ -106,7 +106,7 @@ class IdentifyOptions:
         problems to instead of local processes.
     local_rows : {"all", "auto", "supply_off"}
         ``scale="local"``: samples whose innovations count in the local likelihoods (as
-        :class:`thermctl.greybox.GreyboxOptions` ``fit_rows``; see
+        :class:`thermctl.estimate.likelihood.LikelihoodOptions` ``fit_rows``; see
         :func:`thermctl.local.fit_local` for why ``all``).
     refit_max_states : int
         ``scale="local"``: refit the selected structure on the whole building (one shared
@@ -197,9 +197,9 @@ class Identification:
     options : IdentifyOptions
     selection : SelectionResult or None
         Grey-box pipeline: the model-based selection (path, reasons).
-    greybox : GreyboxEstimator or None
+    greybox : LikelihoodEstimator or None
         Grey-box pipeline: the final fit of the selected structure.
-    intervals : IdentifiabilityReport or None
+    intervals : thermctl.estimate.likelihood.IdentifiabilityReport or None
     local : LocalIdentification or None
         Local pipeline: the local problems, their results and the combined verdicts.
     """
@@ -279,7 +279,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     if progress:
         progress("structure", 1, 1)
     net = sid.network_
-    scores = {f"air:{e.a}-{e.b}": e.score for e in sid.edges_}
+    scores = {air_path_name(e.a, e.b): e.score for e in sid.edges_}
     est = grid = gb = ida = None
     from .model import C_V_PAPER, RBAR_V_PAPER
     rbar_v, c_v = RBAR_V_PAPER, C_V_PAPER
@@ -303,7 +303,8 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
 
 def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
     """SIN candidates → backward elimination by BIC → grey-box fit with intervals."""
-    from .greybox.selection import candidate_pairs, select_edges
+    from .selection import select_air_paths
+    from .structure.search import candidate_pairs
     from .structure.selection import select_edges as rule_edges
 
     spec = meas.spec
@@ -339,7 +340,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
                     spec, include_unmeasured=False)})
     if cands is None:
         cands = [c.pair for c in candidate_pairs(spec)]
-    scores = {} if sid is None else {f"air:{a}-{b}": sid.scores_.get((a, b), float("nan"))
+    scores = {} if sid is None else {air_path_name(a, b): sid.scores_.get((a, b), float("nan"))
                                      for a, b in cands}
     sel = gb = ida = None
     if not cands:
@@ -361,7 +362,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
         direction = "backward" if sid is not None and start is None else "both"
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
-            sel = select_edges(spec, cal, candidates=cands, criterion=opt.selection_criterion,
+            sel = select_air_paths(spec, cal, candidates=cands, criterion=opt.selection_criterion,
                                direction=direction, margin=opt.margin, progress=say,
                                on_fit=on_fit,
                                start=start or (),
@@ -422,7 +423,7 @@ def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
         # path (the local problems keep some) drags the true ones — measured on the 7-zone
         # corridor testbed, a shared refit put R̄_v at 13× the truth, the local per-edge
         # values were within 23 %
-        init = {f"rbar_v[{k}]": v for k, v in li.rbar_v.items() if np.isfinite(v)}
+        init = {ConvectionParameters.key(k): v for k, v in li.rbar_v.items() if np.isfinite(v)}
         if np.isfinite(li.tau0):
             init["tau0"] = li.tau0
         gb, ida = _greybox_fit(net, cal, opt, notes, init=init, per_edge=True)
@@ -528,10 +529,10 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
 def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
     """Grey-box fit of a given structure (``selection="scores"`` with a grey-box criterion,
     or the whole-building refit of local results with ``per_edge``)."""
-    from .greybox import GreyboxEstimator
+    from .estimate.likelihood import LikelihoodEstimator
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
-        gb = GreyboxEstimator(net, criterion=opt.criterion, solar=opt.solar,
+        gb = LikelihoodEstimator(net, criterion=opt.criterion, solar=opt.solar,
                               per_edge=per_edge).fit(cal, init=init)
     return gb, _intervals(gb, opt, notes, cal)
 
@@ -539,7 +540,7 @@ def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
 def _intervals(gb, opt, notes, cal=None):
     if opt.intervals == "none" or gb.criterion != "likelihood":
         return None
-    from .greybox import identifiability
+    from .estimate.likelihood import identifiability
     names = [n for n in gb.problem_.layout.names if n.startswith("rbar_v")] + ["tau0"]
     method = opt.intervals
     if method == "profile" and len(names) > 5:
@@ -585,7 +586,7 @@ def _misfit_note(ida, opt, notes):
 def _greybox_meta(gb, ida) -> dict:
     out = {"criterion": gb.criterion, "params": dict(gb.params_), "nll": gb.nll_,
            "aic": gb.aic_, "bic": gb.bic_, "n_obs": gb.n_obs_, "rows": gb.problem_.fit_rule,
-           "at_bounds": list(gb.result_.at_bounds), "fit_time_s": gb.fit_time_}
+           "active_bounds": list(gb.result_.active_bounds), "wall_time_s": gb.wall_time_}
     if ida is not None:
         out["intervals"] = {k: {"value": iv.value, "lower": iv.lower, "upper": iv.upper,
                                 "level": iv.level, "method": iv.method, "unit": iv.unit,
@@ -598,7 +599,8 @@ def _greybox_meta(gb, ida) -> dict:
 
 
 def _estimate(net, cal, opt, progress):
-    from .estimate import CostProblem, EstimationData, fit, grid_search
+    from .estimate import EstimationData
+    from .estimate.simulation import CostProblem, fit, grid_search
 
     data = EstimationData.from_frame(cal.frame, net)
     problem = CostProblem(net, data, window=opt.window_hours * 3600.0,

@@ -15,7 +15,7 @@ Van den Hof et al., Automatica 2013; Ramaswamy & Van den Hof, IEEE TAC 2021):
   (``BuildingSpec.air_path_length``), to measured zones (a boundary node of the local
   model) or to its unmeasured zones;
 * each problem selects its air paths by forward/backward BIC on its own Kalman likelihood
-  (:func:`thermctl.greybox.selection.select_edges`) and fits one R̄_v per air path.
+  (:func:`thermctl.selection.select_air_paths`) and fits one R̄_v per air path.
 
 An air path between two measured zones is seen by both problems. :func:`combine` joins the
 two verdicts: ``sum`` (default) adds the two BIC changes — the log-likelihood of the whole
@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import BoundWarning, ConvergenceWarning, DataError, EstimationError
-from .network import ThermalNetwork
+from .network import ThermalNetwork, air_path_name
 from .spec import BuildingSpec, Distance, Zone
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
@@ -117,11 +117,6 @@ class LocalProblem:
         return len(self.spec.zones) + 2 * (len(self.spec.walls) + len(self.candidates))
 
 
-def _pair_name(a, b) -> str:
-    a, b = sorted((a, b))
-    return f"air:{a}-{b}"
-
-
 def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool = True,
                    aggregate: bool = True, unmeasured: bool = False,
                    latent_depth: int | None = 1) -> list[LocalProblem]:
@@ -163,7 +158,7 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
     list of LocalProblem
         In spec order.
     """
-    from .greybox.selection import candidate_pairs
+    from .structure.search import candidate_pairs
 
     meas = set(spec.measured_zones)
     zone_set = set(spec.zone_names)
@@ -368,7 +363,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     solar : bool
         Solar apertures on ``solar:`` columns.
     fit_rows : {"all", "auto", "supply_off"}
-        Samples whose innovations count (:class:`thermctl.greybox.GreyboxOptions`). Default
+        Samples whose innovations count (:class:`thermctl.estimate.likelihood.LikelihoodOptions`). Default
         ``all``: a local problem has only its own zones' supply flows as inputs, and the
         supply-off hours alone (``auto``, the whole-building default) found 9 of 18 true air
         paths on the 7-, 9- and 25-zone testbeds; all samples found 18 of 18 (with the
@@ -376,13 +371,13 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     max_iter : int
         Per fit.
     **options
-        Other :class:`thermctl.greybox.GreyboxOptions` fields (``basis``, ``harmonics``...).
+        Other :class:`thermctl.estimate.likelihood.LikelihoodOptions` fields (``basis``, ``harmonics``...).
 
     Returns
     -------
     LocalResult
     """
-    from .greybox.selection import select_edges
+    from .selection import select_air_paths
 
     t0, c0 = time.perf_counter(), time.process_time()
     sub = problem.data(frame)
@@ -393,7 +388,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         warnings.simplefilter("ignore", ConvergenceWarning)
-        sel = select_edges(problem.spec, sub, candidates=list(problem.candidates),
+        sel = select_air_paths(problem.spec, sub, candidates=list(problem.candidates),
                            criterion=criterion, direction="both", margin=margin,
                            final_per_edge=True, max_iter=max_iter, solar=solar,
                            fit_rows=fit_rows, **options)
@@ -407,7 +402,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
             evidence[st.edge] = -float(st.delta)     # what removing it cost, negated
         if st.action == "keep":
             evidence.update({k: -float(v) for k, v in st.screened.items()})
-    kept = [_pair_name(a, b) for a, b, _ in sel.edges]
+    kept = [air_path_name(a, b) for a, b, _ in sel.edges]
     for k in kept:          # a kept edge always has a removal cost (keep step) or an add delta
         evidence.setdefault(k, -float(margin))
     est = sel.estimator
@@ -537,7 +532,7 @@ class EdgeVerdict:
 
     @property
     def name(self) -> str:
-        return _pair_name(self.a, self.b)
+        return air_path_name(self.a, self.b)
 
 
 def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list[EdgeVerdict]:
@@ -568,11 +563,11 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
     seen: dict[str, dict] = {}
     for p, r in zip(problems, results):
         for a, b, d in p.candidates:
-            e = seen.setdefault(_pair_name(a, b), {"a": min(a, b), "b": max(a, b), "d": d,
+            e = seen.setdefault(air_path_name(a, b), {"a": min(a, b), "b": max(a, b), "d": d,
                                                    "ev": {}, "kept": {}, "rb": {}})
             if r.error is not None:
                 continue
-            nm = _pair_name(a, b)
+            nm = air_path_name(a, b)
             e["ev"][p.zone] = float(r.evidence.get(nm, np.nan))
             e["kept"][p.zone] = nm in r.edges
             if nm in r.rbar_v and nm in r.edges:

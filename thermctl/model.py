@@ -36,7 +36,7 @@ from ._step import radau_casadi_step, radau_stepper
 from .errors import ModelError
 from .network import ThermalNetwork
 
-__all__ = ["ThermalModel", "CasadiModel", "OperatingPoint", "zoh", "make_stepper", "RBAR_V_PAPER", "C_V_PAPER"]
+__all__ = ["ThermalModel", "ConvectionParameters", "CasadiModel", "OperatingPoint", "zoh", "make_stepper", "RBAR_V_PAPER", "C_V_PAPER"]
 
 RBAR_V_PAPER = 3.36e-4
 """Convection resistance per unit distance identified by Goyal et al. [K/(W m)]."""
@@ -117,6 +117,81 @@ def _triplet(terms: dict, n: int, m: int) -> ca.SX:
     return ca.SX.triplet(rows, cols, vals, n, m)
 
 
+@dataclass(frozen=True)
+class ConvectionParameters:
+    """The convection parameters of a network's air paths, per edge, with their names.
+
+    The one place parameter names are spelled (``rbar_v[air:a-b]``, ``c_v[air:a-b]``,
+    ``tau0[air:a-b]``) and the one conversion between ``(R̄_v, C_v)`` and ``(R̄_v, τ0)``
+    with ``τ0 = R̄_v·C_v`` [s/m] (the edge's time constant per metre of air path).
+
+    Attributes
+    ----------
+    edges : tuple of str
+        Air-path names (:func:`thermctl.network.air_path_name`), in the network's order.
+    rbar_v : ndarray, shape (m,)
+        Convection resistance per unit distance [K/(W m)].
+    c_v : ndarray, shape (m,)
+        Convection capacitance [J/K].
+
+    Examples
+    --------
+    >>> cp = ConvectionParameters.from_model(model)            # doctest: +SKIP
+    >>> cp.as_dict()["rbar_v[air:r1-r2]"]                      # doctest: +SKIP
+    """
+
+    edges: tuple
+    rbar_v: np.ndarray
+    c_v: np.ndarray
+
+    @staticmethod
+    def key(edge: str, kind: str = "rbar_v") -> str:
+        """Parameter name of ``kind`` (``rbar_v``, ``c_v`` or ``tau0``) of air path ``edge``."""
+        return f"{kind}[{edge}]"
+
+    @staticmethod
+    def edge_of(key: str) -> str | None:
+        """The air-path name in a parameter name (``None`` for a shared parameter)."""
+        return key[key.index("[") + 1:-1] if "[" in key and key.endswith("]") else None
+
+    @classmethod
+    def from_tau0(cls, edges, rbar_v, tau0) -> "ConvectionParameters":
+        """From ``R̄_v`` [K/(W m)] and ``τ0`` [s/m] (scalars or one per edge)."""
+        m = len(edges)
+        rb = np.broadcast_to(np.asarray(rbar_v, float), (m,)).copy()
+        return cls(tuple(edges), rb, np.broadcast_to(np.asarray(tau0, float), (m,)) / rb)
+
+    @classmethod
+    def from_model(cls, model: "ThermalModel") -> "ConvectionParameters":
+        """The per-edge values of ``model`` (shared values repeated)."""
+        conv = model.network.convection_edges
+        p = model.p
+        m = len(conv)
+        return cls(tuple(e.name for e in conv), p[:m].copy(), p[m:].copy())
+
+    @property
+    def tau0(self) -> np.ndarray:
+        """``R̄_v·C_v`` per edge [s/m]."""
+        return self.rbar_v * self.c_v
+
+    @property
+    def names(self) -> list:
+        """Parameter names in the model's vector order: every ``rbar_v`` then every ``c_v``."""
+        return ([self.key(e) for e in self.edges] + [self.key(e, "c_v") for e in self.edges])
+
+    def as_dict(self, kinds=("rbar_v",)) -> dict:
+        """``{name: value}`` of the given kinds (``rbar_v``, ``c_v``, ``tau0``)."""
+        vals = {"rbar_v": self.rbar_v, "c_v": self.c_v, "tau0": self.tau0}
+        return {self.key(e, k): float(vals[k][i]) for k in kinds
+                for i, e in enumerate(self.edges)}
+
+    def to_model(self, network: ThermalNetwork, meta: dict | None = None) -> "ThermalModel":
+        """A :class:`ThermalModel` of ``network`` with these values (edges matched by
+        name)."""
+        order = [self.edges.index(e.name) for e in network.convection_edges]
+        return ThermalModel(network, rbar_v=self.rbar_v[order], c_v=self.c_v[order], meta=meta)
+
+
 class _Symbolic:
     """CasADi expressions of a network, built once per network."""
 
@@ -167,7 +242,8 @@ class _Symbolic:
         self.AB = ca.Function("AB", [p], [A, Bt], ["p"], ["A", "Bt"])
         cap_all = ca.vertcat(*cap)
         self.cap = ca.Function("cap", [p], [cap_all], ["p"], ["cap"])
-        self.param_names = ([f"rbar_v[{e.name}]" for e in conv] + [f"c_v[{e.name}]" for e in conv])
+        self.param_names = ConvectionParameters(tuple(e.name for e in conv), np.zeros(m),
+                                                np.zeros(m)).names
         self._F = {}
 
     def step(self, substeps: int) -> ca.Function:

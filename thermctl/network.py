@@ -22,7 +22,14 @@ import numpy as np
 from .errors import ModelError, SpecError
 from .spec import BuildingSpec
 
-__all__ = ["Edge", "ThermalNetwork"]
+__all__ = ["Edge", "ThermalNetwork", "air_path_name"]
+
+
+def air_path_name(a: str, b: str) -> str:
+    """Name of the air path (convection edge) between nodes ``a`` and ``b``: ``air:a-b``
+    with the ends sorted, the one spelling every module uses."""
+    a, b = sorted((str(a), str(b)))
+    return f"air:{a}-{b}"
 
 CONDUCTION = "conduction"
 CONVECTION = "convection"
@@ -90,7 +97,7 @@ class ThermalNetwork:
             edges.append(Edge(name, w.a, w.b, CONDUCTION, tuple(w.R), tuple(w.C)))
         for item in convection:
             a, b, d = self._convection_entry(item)
-            name = f"air:{a}-{b}"
+            name = air_path_name(a, b)
             if name in used:
                 raise SpecError(f"convection edge {a}-{b} given twice")
             used.add(name)

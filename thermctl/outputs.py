@@ -443,12 +443,12 @@ def _estimate_summary(est):
 def _edge_time_constants(model: ThermalModel) -> dict:
     """Slowest time constant of each convection edge's own 3R2C chain [s]."""
     from . import rc
+    from .model import ConvectionParameters
+    cp = ConvectionParameters.from_model(model)
     out = {}
-    p = model.p
-    m = len(model.network.convection_edges)
-    for k, e in enumerate(model.network.convection_edges):
-        R = p[k] * e.d
-        out[e.name] = rc.time_constant([R, R, R], [p[m + k], p[m + k]])
+    for e, rb, cv in zip(model.network.convection_edges, cp.rbar_v, cp.c_v):
+        R = rb * e.d
+        out[e.name] = rc.time_constant([R, R, R], [cv, cv])
     return out
 
 

@@ -51,7 +51,7 @@ pre{background:#f6f8fa;padding:.6em;font-size:.85em;white-space:pre-wrap;overflo
 .muted{color:#777;font-size:.85em}
 """
 
-# what each grey-box parameter group is (units come from thermctl.greybox.params.GROUP_UNITS)
+# what each grey-box parameter group is (units come from thermctl.estimate.likelihood.params.GROUP_UNITS)
 _MEANING = {
     "rbar_v": "air-path resistance per metre of path",
     "tau0": "τ0 = R̄_v·C_v",
@@ -257,11 +257,11 @@ def _bounds(at_bounds) -> dict:
 
 def _parameter_rows(ident: dict) -> tuple[list[dict], list[str], list[str]]:
     """Rows of the parameter table (units, intervals, bound flags), row classes, flagged names."""
-    from .greybox.params import GROUP_UNITS
+    from .estimate.likelihood.params import GROUP_UNITS
 
     g = ident.get("greybox") or {}
     params = g.get("params") or {}
-    bounds = _bounds(g.get("at_bounds"))
+    bounds = _bounds(g.get("active_bounds"))
     ivs = g.get("intervals") or {}
     level = next((iv.get("level") for iv in ivs.values() if iv.get("level")), None)
     icol = f"{100 * level:.0f} % interval" if level else "interval"

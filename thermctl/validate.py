@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ModelError
-from .model import ThermalModel, zoh
+from .model import ConvectionParameters, ThermalModel, zoh
 
 __all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "relative_error",
            "minimum_flows", "kstep_validation", "ValidationReport", "validate", "Verdict",
@@ -171,7 +171,7 @@ def _physical_fix(model: ThermalModel) -> tuple[dict, bool]:
     tau0 = float(np.exp(np.mean(np.log(rb * cv))))
     if np.allclose(rb, rb[0], rtol=1e-9):
         return {"rbar_v": float(rb[0]), "tau0": tau0}, False
-    fix = {f"rbar_v[{e.name}]": float(r) for e, r in zip(edges, rb)}
+    fix = {ConvectionParameters.key(e.name): float(r) for e, r in zip(edges, rb)}
     fix["tau0"] = tau0
     return fix, True
 
@@ -183,10 +183,10 @@ def kstep_validation(models: dict, calibration, validation,
     Every model gets the same treatment: its walls and convection edges are held as they
     are; the unmeasured gains (random-walk states), solar apertures and noise intensities
     are fitted by maximum likelihood on ``calibration``
-    (:class:`~thermctl.greybox.GreyboxEstimator` with the physical parameters fixed);
+    (:class:`~thermctl.estimate.likelihood.LikelihoodEstimator` with the physical parameters fixed);
     the Kalman filter then runs through ``validation`` and, from its state every hour,
     each model predicts ``horizons_h`` ahead with the gains held
-    (:func:`~thermctl.greybox.kstep_errors`).
+    (:func:`~thermctl.estimate.likelihood.kstep_errors`).
 
     Parameters
     ----------
@@ -205,12 +205,12 @@ def kstep_validation(models: dict, calibration, validation,
     import warnings
 
     from .errors import BoundWarning
-    from .greybox import GreyboxEstimator, kstep_errors
+    from .estimate.likelihood import LikelihoodEstimator, kstep_errors
 
     out = {}
     for name, m in models.items():
         fix, per_edge = _physical_fix(m)
-        est = GreyboxEstimator(m.network, fix=fix or None, per_edge=per_edge, solar=solar,
+        est = LikelihoodEstimator(m.network, fix=fix or None, per_edge=per_edge, solar=solar,
                                rbar_v=np.asarray(m.rbar_v, float))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)

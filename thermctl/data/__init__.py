@@ -65,8 +65,10 @@ from .days import DayArray, day_array
 from .measurements import (MIN_CALIBRATION_DAYS, PAPER_CALIBRATION, PAPER_VALIDATION_START, Gap,
                            Measurements, QualityReport)
 from ._read import CFM, read_measurements
+from .inputs import GAP_POLICIES, network_inputs
 
 __all__ = [
+    "network_inputs", "GAP_POLICIES",
     "read_measurements", "Measurements", "QualityReport", "Gap", "DayArray", "day_array",
     "CFM", "PAPER_CALIBRATION", "PAPER_VALIDATION_START", "MIN_CALIBRATION_DAYS",
 ]

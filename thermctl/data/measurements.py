@@ -21,6 +21,7 @@ from ..errors import DataError, DataWarning
 from ..spec import BuildingSpec
 from ._grid import _DAY_NS, _fmt_step, _parse, _runs, _timedelta
 from .days import DayArray, day_array
+from .inputs import network_inputs
 
 __all__ = ["Measurements", "QualityReport", "Gap", "PAPER_CALIBRATION", "PAPER_VALIDATION_START",
            "MIN_CALIBRATION_DAYS"]
@@ -283,7 +284,8 @@ class Measurements:
 
         A zone without supply columns gets ``ms = 0`` and ``Ts`` = its own temperature
         (or, for an unmeasured zone or inside a gap, the mean of the measured zones,
-        so that ``0·Ts`` never turns into NaN); a zone without ``Q:`` gets ``Q = 0``.
+        so that ``0·Ts`` never turns into NaN); a zone without ``Q:`` gets ``Q = 0``
+        (:func:`thermctl.data.network_inputs`, gaps kept as NaN).
 
         Parameters
         ----------
@@ -301,25 +303,7 @@ class Measurements:
                 f"{self.source}: network nodes do not match the data's spec "
                 f"{self.spec.source}: zones {sorted(zones)} vs {sorted(self.spec.zone_names)}, "
                 f"boundary {sorted(bnd)} vs {sorted(self.spec.boundary)}")
-        f = self.frame
-        n = len(f)
-        measured = [f[f"T:{z}"].to_numpy() for z in self.spec.measured_zones]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)   # all-NaN rows inside gaps
-            mean_t = np.nanmean(np.vstack(measured), axis=0) if measured else np.full(n, np.nan)
-        mean_t = np.where(np.isfinite(mean_t), mean_t, 20.0)    # no zone measured: any value
-        ms, ts, q = [], [], []
-        for z in zones:
-            if f"ms:{z}" in f:
-                ms.append(f[f"ms:{z}"].to_numpy())
-                ts.append(f[f"Ts:{z}"].to_numpy())
-            else:
-                own = f[f"T:{z}"].to_numpy() if f"T:{z}" in f else mean_t
-                ms.append(np.zeros(n))
-                ts.append(np.where(np.isfinite(own), own, mean_t))
-            q.append(f[f"Q:{z}"].to_numpy() if f"Q:{z}" in f else np.zeros(n))
-        tb = [f[f"T:{b}"].to_numpy() for b in bnd]
-        return np.column_stack(ms + ts + tb + q).astype(float)
+        return network_inputs(self.frame, network)
 
     # ---- time windows and splits ---------------------------------------------
     def window(self, start=None, end=None, duration=None) -> "Measurements":

@@ -75,7 +75,7 @@ def plot_profiles(report, figsize=(7.0, 3.5)) -> Figure:
 
     Parameters
     ----------
-    report : IdentifiabilityReport
+    report : thermctl.estimate.simulation.ProfileReport
         From :func:`thermctl.estimate.identifiability_report` (or ``result.identifiability``).
     figsize : tuple of float
         [in]

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..errors import ModelError
-from ..model import OperatingPoint, ThermalModel
+from ..model import ConvectionParameters, OperatingPoint, ThermalModel
 from ..network import CONVECTION
 from .. import rc
 from ._lti import gramians, prepare, residualize_edges
@@ -100,9 +100,8 @@ def kron(model: ThermalModel, op: OperatingPoint, tau: float | None = None) -> R
     _check_model(model, op)
     net = model.network
     nz, n = net.n_zones, net.n_states
-    p = model.p
-    m = len(net.convection_edges)
-    rbar, cv = p[:m], p[m:]
+    cp = ConvectionParameters.from_model(model)
+    rbar, cv = cp.rbar_v, cp.c_v
     elim = []
     k_conv = 0
     for k, e in enumerate(net.edges):

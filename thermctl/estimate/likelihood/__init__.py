@@ -6,17 +6,16 @@ maximum likelihood through a stationary continuous–discrete Kalman filter buil
 CasADi (exact derivatives), or by k-step-ahead prediction error from filtered states.
 
 Modules: :mod:`.kalman` (discretisation, Riccati, filters), :mod:`.problem` (the model
-and its CasADi criteria), :mod:`.estimator` (:class:`GreyboxEstimator`), :mod:`.kstep`
+and its CasADi criteria), :mod:`.estimator` (:class:`LikelihoodEstimator`), :mod:`.kstep`
 (k-step validation), :mod:`.uncertainty` (intervals and identifiability verdicts),
 :mod:`.selection` (model-based convection-edge selection).
 """
 
-from .data import GreyboxData
-from .estimator import GreyboxEstimator, GreyboxResult, as_greybox_data
+from .estimator import LikelihoodEstimator, LikelihoodResult
 from .kstep import KStepResult, kstep_errors
-from .problem import GreyboxOptions, GreyboxProblem
+from .problem import LikelihoodOptions, LikelihoodProblem
 from .uncertainty import IdentifiabilityReport, ParameterInterval, identifiability
 
-__all__ = ["GreyboxData", "GreyboxEstimator", "GreyboxResult", "GreyboxOptions",
-           "GreyboxProblem", "KStepResult", "kstep_errors", "IdentifiabilityReport",
-           "ParameterInterval", "identifiability", "as_greybox_data"]
+__all__ = ["LikelihoodEstimator", "LikelihoodResult", "LikelihoodOptions",
+           "LikelihoodProblem", "KStepResult", "kstep_errors", "IdentifiabilityReport",
+           "ParameterInterval", "identifiability"]

@@ -1,7 +1,7 @@
 """Maximum-likelihood (or k-step) estimation of a network model with unmeasured gains.
 
-:class:`GreyboxEstimator` is the public entry point: it builds a
-:class:`~thermctl.greybox.problem.GreyboxProblem` for a network and data, minimises the
+:class:`LikelihoodEstimator` is the public entry point: it builds a
+:class:`~thermctl.estimate.likelihood.problem.LikelihoodProblem` for a network and data, minimises the
 chosen criterion, and exposes the identified :class:`~thermctl.model.ThermalModel` and
 everything a report needs.
 """
@@ -16,30 +16,20 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .._blas import single_thread_blas
-from ..errors import BoundWarning, DataError, EstimationError
-from ..model import RBAR_V_PAPER
-from ..network import ThermalNetwork
-from .data import GreyboxData
+from ..._blas import single_thread_blas
+from ...errors import BoundWarning, DataError, EstimationError
+from ...model import RBAR_V_PAPER
+from ...network import ThermalNetwork
+from ..data import EstimationData, as_estimation_data
 from .optimize import CRITERIA, minimize_criterion
-from .problem import GreyboxOptions, GreyboxProblem
+from .problem import LikelihoodOptions, LikelihoodProblem
 
-__all__ = ["GreyboxEstimator", "GreyboxResult", "as_greybox_data"]
+__all__ = ["LikelihoodEstimator", "LikelihoodResult"]
 
 log = logging.getLogger(__name__)
 
-def as_greybox_data(data, network: ThermalNetwork) -> GreyboxData:
-    """``GreyboxData`` from itself, :class:`thermctl.data.Measurements` or a DataFrame."""
-    if isinstance(data, GreyboxData):
-        return data
-    if hasattr(data, "U") and hasattr(data, "Y") and hasattr(data, "dt"):   # EstimationData
-        return GreyboxData.from_arrays(network, data.U, data.Y, data.dt, zones=data.zones,
-                                       time=getattr(data, "time", None))
-    return GreyboxData.from_measurements(data, network)
-
-
 @dataclass
-class GreyboxResult:
+class LikelihoodResult:
     """What a grey-box fit found.
 
     Attributes
@@ -48,7 +38,7 @@ class GreyboxResult:
     value : float
         Criterion at the optimum (negative log-likelihood, or k-step SSE [K²]).
     params : dict
-        Every parameter in natural units (see :data:`~thermctl.greybox.params.GROUP_UNITS`).
+        Every parameter in natural units (see :data:`~thermctl.estimate.likelihood.params.GROUP_UNITS`).
     rbar_v, c_v : ndarray
         Per convection edge [K/(W m)], [J/K].
     edges : list of str
@@ -58,11 +48,11 @@ class GreyboxResult:
         Free parameters.
     aic, bic : float
         ``2 nll + 2 k`` and ``2 nll + k ln n_obs`` (likelihood criterion only).
-    at_bounds : list of str
+    active_bounds : list of str
     success : bool
     message : str
-    n_iter : int
-    fit_time : float
+    iterations : int
+    wall_time : float
         [s]
     starts : list of (dict, float)
         Start values of R̄_v tried and the criterion each reached.
@@ -80,18 +70,18 @@ class GreyboxResult:
     n_free: int
     aic: float
     bic: float
-    at_bounds: list
+    active_bounds: list
     success: bool
     message: str
-    n_iter: int
-    fit_time: float
+    iterations: int
+    wall_time: float
     starts: list = field(default_factory=list)
     rows: str = "all"
 
     def summary(self) -> str:
         lines = [f"grey-box fit ({self.criterion}): value {self.value:.6g}, "
                  f"{self.n_free} free parameters, {self.n_obs} observations ({self.rows}), "
-                 f"{self.n_iter} iterations, {self.fit_time:.1f} s"
+                 f"{self.iterations} iterations, {self.wall_time:.1f} s"
                  + ("" if self.success else f" — NOT CONVERGED: {self.message}")]
         for e, r, c in zip(self.edges, self.rbar_v, self.c_v):
             lines.append(f"  {e}: rbar_v = {r:.4g} K/(W m), c_v = {c:.4g} J/K")
@@ -100,17 +90,17 @@ class GreyboxResult:
                 lines.append(f"  {k} = {v:.4g}")
         if np.isfinite(self.aic):
             lines.append(f"  AIC {self.aic:.2f}, BIC {self.bic:.2f}")
-        for b in self.at_bounds:
+        for b in self.active_bounds:
             lines.append(f"  at bound: {b}")
         return "\n".join(lines)
 
 
-class GreyboxEstimator:
+class LikelihoodEstimator:
     r"""Fit a thermal network with unmeasured gains by a Kalman-filter criterion.
 
     The model is the network's own (walls, zones, convection edges ``R = R̄_v d``,
     ``C = C_v``) plus a random-walk heat gain per measured zone, white heat noise per
-    zone and sensor noise; see :mod:`thermctl.greybox.problem`. Parameters are found by
+    zone and sensor noise; see :mod:`thermctl.estimate.likelihood.problem`. Parameters are found by
     minimising the negative log-likelihood of the one-step innovations of the
     stationary Kalman filter (``criterion="likelihood"``) or the k-step-ahead squared
     prediction error from filtered states (``criterion="kstep"``), with exact CasADi
@@ -140,15 +130,15 @@ class GreyboxEstimator:
     fix : dict, optional
         Parameters held at a value (natural units), e.g. ``{"tau0": 1.0}``.
     max_iter : int
-    options : GreyboxOptions, optional
+    options : LikelihoodOptions, optional
         Model and criterion options; keyword arguments below override its fields.
     **kwargs
-        Any field of :class:`GreyboxOptions` (``per_edge``, ``disturbance``, ``basis``,
+        Any field of :class:`LikelihoodOptions` (``per_edge``, ``disturbance``, ``basis``,
         ``solar``, ``noise``, ``burn_in``, ``fit_rows``, ``holdoff``, ``horizon`` ...).
 
     Attributes
     ----------
-    problem_ : GreyboxProblem
+    problem_ : LikelihoodProblem
     eta_ : ndarray
         Optimiser coordinates at the optimum.
     params_ : dict
@@ -165,19 +155,19 @@ class GreyboxEstimator:
         Negative log-likelihood at the optimum (also after a k-step fit).
     aic_, bic_ : float
     n_obs_, n_free_ : int
-    result_ : GreyboxResult
+    result_ : LikelihoodResult
 
     Examples
     --------
-    >>> est = GreyboxEstimator(net).fit(measurements)      # doctest: +SKIP
+    >>> est = LikelihoodEstimator(net).fit(measurements)      # doctest: +SKIP
     >>> print(est.result_.summary())                      # doctest: +SKIP
-    >>> from thermctl.greybox import identifiability
+    >>> from thermctl.estimate.likelihood import identifiability
     >>> print(identifiability(est))                       # doctest: +SKIP
     """
 
     def __init__(self, network: ThermalNetwork, criterion: str = "likelihood", *,
                  rbar_v=RBAR_V_PAPER, c_v=None, solver: str = "lbfgs", rbar_starts=None,
-                 fix: dict | None = None, max_iter: int = 300, options: GreyboxOptions | None = None,
+                 fix: dict | None = None, max_iter: int = 300, options: LikelihoodOptions | None = None,
                  **kwargs):
         self.network = network
         self.criterion = criterion
@@ -191,33 +181,33 @@ class GreyboxEstimator:
         self.kwargs = kwargs
 
     # ------------------------------------------------------------------ helpers
-    def make_options(self) -> GreyboxOptions:
-        """The :class:`GreyboxOptions` this estimator uses."""
-        base = self.options or GreyboxOptions()
-        names = {f.name for f in fields(GreyboxOptions)}
+    def make_options(self) -> LikelihoodOptions:
+        """The :class:`LikelihoodOptions` this estimator uses."""
+        base = self.options or LikelihoodOptions()
+        names = {f.name for f in fields(LikelihoodOptions)}
         bad = sorted(set(self.kwargs) - names)
         if bad:
             raise EstimationError(f"unknown option(s) {bad}; options are {sorted(names)}")
-        vals = {f.name: getattr(base, f.name) for f in fields(GreyboxOptions)}
+        vals = {f.name: getattr(base, f.name) for f in fields(LikelihoodOptions)}
         vals.update(self.kwargs)
-        return GreyboxOptions(**vals)
+        return LikelihoodOptions(**vals)
 
-    def make_problem(self, data, init: dict | None = None) -> GreyboxProblem:
+    def make_problem(self, data, init: dict | None = None) -> LikelihoodProblem:
         """The problem for ``data`` (same network and options), start values from ``init``."""
-        data = as_greybox_data(data, self.network)
-        pb = GreyboxProblem(self.network, data, self.make_options(), rbar_v=self.rbar_v,
+        data = as_estimation_data(data, self.network)
+        pb = LikelihoodProblem(self.network, data, self.make_options(), rbar_v=self.rbar_v,
                             c_v=self.c_v, init=init)
         if self.fix:
             pb.layout = pb.layout.with_fixed(self.fix, self.fix)
         return pb
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data, init: dict | None = None) -> "GreyboxEstimator":
+    def fit(self, data, init: dict | None = None) -> "LikelihoodEstimator":
         """Estimate the parameters from data.
 
         Parameters
         ----------
-        data : GreyboxData, thermctl.data.Measurements or pandas.DataFrame
+        data : EstimationData, thermctl.data.Measurements or pandas.DataFrame
         init : dict, optional
             Start values by parameter name (natural units), e.g. ``other.params_``.
 
@@ -274,23 +264,23 @@ class GreyboxEstimator:
         phys = [b for b in bounds if b.startswith(("rbar_v", "tau0"))]
         if phys:
             warnings.warn("; ".join(phys) + ": the criterion, not the building, chose this "
-                          "value (see thermctl.greybox.uncertainty)", BoundWarning, stacklevel=2)
+                          "value (see thermctl.estimate.likelihood.uncertainty)", BoundWarning, stacklevel=2)
         self.model_ = pb.thermal_model(res.eta, meta={"greybox": {
             "criterion": self.criterion, "params": self.params_, "nll": self.nll_}})
-        self.fit_time_ = time.perf_counter() - t0
-        self.result_ = GreyboxResult(self.criterion, self.value_, dict(self.params_), rb, cv,
+        self.wall_time_ = time.perf_counter() - t0
+        self.result_ = LikelihoodResult(self.criterion, self.value_, dict(self.params_), rb, cv,
                                      [e.name for e in pb.edges], self.n_obs_, self.n_free_,
                                      self.aic_, self.bic_, bounds, res.success, res.message,
-                                     res.n_iter, self.fit_time_, tried, pb.fit_rule)
+                                     res.n_iter, self.wall_time_, tried, pb.fit_rule)
         log.info("grey-box fit: %s", self.result_.summary().replace("\n", "; "))
         return self
 
     # ------------------------------------------------------------------ use
     def _check_fitted(self):
         if not hasattr(self, "eta_"):
-            raise EstimationError("this GreyboxEstimator is not fitted yet; call fit(data) first")
+            raise EstimationError("this LikelihoodEstimator is not fitted yet; call fit(data) first")
 
-    def problem_for(self, data) -> GreyboxProblem:
+    def problem_for(self, data) -> LikelihoodProblem:
         """A problem on other data (same network and options) whose layout matches ``eta_``."""
         self._check_fitted()
         pb = self.make_problem(data, init=self.params_)

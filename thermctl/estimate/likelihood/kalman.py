@@ -42,8 +42,8 @@ import casadi as ca
 import numpy as np
 import scipy.linalg as sla
 
-from .._blas import single_thread_blas
-from ..errors import EstimationError
+from ..._blas import single_thread_blas
+from ...errors import EstimationError
 
 __all__ = ["expm_taylor", "n_squarings", "discretize", "discretize_np", "dare_sda", "dare_np",
            "stein_np", "DareCallback",

@@ -9,7 +9,7 @@ measurements it is scored on. This is the measure thermctl validates with at 1, 
 for the identified and the conduction-only model alike.
 
 The CasADi version of the same criterion (for estimation) is
-:meth:`GreyboxProblem.kstep <thermctl.greybox.problem.GreyboxProblem.kstep>`.
+:meth:`LikelihoodProblem.kstep <thermctl.estimate.likelihood.problem.LikelihoodProblem.kstep>`.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._blas import single_thread_blas
-from ..errors import DataError
+from ..._blas import single_thread_blas
+from ...errors import DataError
 
 __all__ = ["KStepResult", "filtered_states", "kstep_errors"]
 
@@ -97,9 +97,9 @@ def kstep_errors(problem, eta, horizons=(3600.0, 6 * 3600.0, 24 * 3600.0), strid
 
     Parameters
     ----------
-    problem : GreyboxProblem
+    problem : LikelihoodProblem
         Built on the data to score (validation data: build it with
-        :meth:`GreyboxEstimator.problem_for`).
+        :meth:`LikelihoodEstimator.problem_for`).
     eta : array_like
         Parameters (e.g. ``estimator.eta_``).
     horizons : sequence of float

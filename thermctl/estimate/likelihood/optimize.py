@@ -1,4 +1,4 @@
-"""Minimise a :class:`~thermctl.greybox.problem.GreyboxProblem` criterion over ``eta``.
+"""Minimise a :class:`~thermctl.estimate.likelihood.problem.LikelihoodProblem` criterion over ``eta``.
 
 Two solvers, both fed the exact CasADi gradient:
 
@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
 
-from ..errors import ConvergenceWarning, EstimationError
+from ...errors import ConvergenceWarning, EstimationError
 
 __all__ = ["OptResult", "minimize_criterion", "CRITERIA", "SOLVERS"]
 
@@ -73,7 +73,7 @@ def minimize_criterion(problem, criterion: str = "likelihood", eta0=None, *, sol
 
     Parameters
     ----------
-    problem : GreyboxProblem
+    problem : LikelihoodProblem
     criterion : {"likelihood", "kstep"}
     eta0 : array_like, optional
         Start (default: the layout's start values).

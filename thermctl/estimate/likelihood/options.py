@@ -1,20 +1,18 @@
-"""Options of the stochastic grey-box model and its criteria (:class:`GreyboxOptions`)."""
+"""Options of the stochastic grey-box model and its criteria (:class:`LikelihoodOptions`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import EstimationError
+from ...errors import EstimationError
+from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
 
-__all__ = ["GreyboxOptions", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
-
-T_MIN, T_MAX = 4.0, 20.0        # [s/m], the paper's range of convective time constants per metre
-RBAR_BOUNDS = (1e-6, 1e-2)      # [K/(W m)], the paper's search range
+__all__ = ["LikelihoodOptions"]
 
 
 @dataclass(frozen=True)
-class GreyboxOptions:
-    """Model and criterion options of :class:`GreyboxProblem`.
+class LikelihoodOptions:
+    """Model and criterion options of :class:`LikelihoodProblem`.
 
     Attributes
     ----------

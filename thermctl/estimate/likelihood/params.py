@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import EstimationError
+from ...errors import EstimationError
 
 __all__ = ["Param", "ParamLayout", "GROUP_UNITS"]
 

@@ -21,9 +21,9 @@ once per parameter value (see :mod:`.kalman`). The error is the sensor error tim
 An unmeasured zone keeps the bilinear term at its mean flow in ``A``; the deviation
 from it is applied to the mean measured temperature (exact when it has no supply air).
 
-Which samples count (``GreyboxOptions.fit_rows``): by default only those after 3 h with
+Which samples count (``LikelihoodOptions.fit_rows``): by default only those after 3 h with
 no supply air anywhere — in closed loop the logged supply depends on readings the log
-does not hold, which biases the likelihood (see :class:`.GreyboxOptions`).
+does not hold, which biases the likelihood (see :class:`.LikelihoodOptions`).
 
 Parameters (:mod:`.params`): R̄_v (shared or per edge), τ0 = R̄_v·C_v (its bounds are the
 paper's :math:`t_{min}/\alpha \le \tau_0 \le t_{max}/\alpha`), noise intensities σ_v, σ_q,
@@ -40,23 +40,24 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import DataError, EstimationError
-from ..model import RBAR_V_PAPER, ThermalModel
-from ..network import ThermalNetwork
-from ..spec import is_outdoor
+from ...errors import DataError, EstimationError
+from ...model import RBAR_V_PAPER, ConvectionParameters, ThermalModel
+from ...network import ThermalNetwork
+from ...spec import is_outdoor
 from . import kalman
-from .data import GreyboxData
-from .options import RBAR_BOUNDS, T_MAX, T_MIN, GreyboxOptions
+from ..data import EstimationData
+from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
+from .options import LikelihoodOptions
 from .params import Param, ParamLayout
 
-__all__ = ["GreyboxOptions", "GreyboxProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
+__all__ = ["LikelihoodOptions", "LikelihoodProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
 
 log = logging.getLogger(__name__)
 
 _KW = 1e-3                      # gains and heat inputs are in kW inside: states O(0.1–1)
 
 
-class GreyboxProblem:
+class LikelihoodProblem:
     """Likelihood and k-step criterion of a network model on data, as CasADi functions.
 
     The decision vector ``eta`` is described by :attr:`layout`. Everything that depends on
@@ -67,8 +68,8 @@ class GreyboxProblem:
     ----------
     network : ThermalNetwork
         The structure (conduction and convection edges).
-    data : GreyboxData
-    options : GreyboxOptions, optional
+    data : EstimationData
+    options : LikelihoodOptions, optional
     rbar_v : float or array_like
         Start value of R̄_v [K/(W m)] (shared or per edge).
     c_v : float or None
@@ -85,9 +86,9 @@ class GreyboxProblem:
         k-step restarts.
     """
 
-    def __init__(self, network: ThermalNetwork, data: GreyboxData, options: GreyboxOptions | None = None,
+    def __init__(self, network: ThermalNetwork, data: EstimationData, options: LikelihoodOptions | None = None,
                  *, rbar_v=RBAR_V_PAPER, c_v=None, init: dict | None = None):
-        self.options = opt = options or GreyboxOptions()
+        self.options = opt = options or LikelihoodOptions()
         opt.check()
         data.check(network)
         self.network = network
@@ -181,7 +182,7 @@ class GreyboxProblem:
         return [bnd.index(b) for b in rule]
 
     def _fit_rows(self, ms):
-        """Rows whose innovations enter the likelihood (see ``GreyboxOptions.fit_rows``)."""
+        """Rows whose innovations enter the likelihood (see ``LikelihoodOptions.fit_rows``)."""
         rule = self.options.fit_rows
         N = len(ms)
         if isinstance(rule, str):
@@ -264,7 +265,7 @@ class GreyboxProblem:
             rb = np.broadcast_to(np.asarray(rbar_v, dtype=float), (m,))
             if opt.per_edge:
                 for e, r in zip(self.edges, rb):
-                    self.i_rbar.append(lay.add(Param(f"rbar_v[{e.name}]", "rbar_v", True,
+                    self.i_rbar.append(lay.add(Param(ConvectionParameters.key(e.name), "rbar_v", True,
                                                      float(np.clip(r, lo_r, hi_r)), lo_r, hi_r)))
             else:
                 r0 = float(np.exp(np.mean(np.log(rb))))

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2, norm
 
-from .._blas import single_thread_blas
-from ..errors import ConvergenceWarning, EstimationError
+from ..._blas import single_thread_blas
+from ...errors import ConvergenceWarning, EstimationError
 from .optimize import minimize_criterion
 
 __all__ = ["ParameterInterval", "IdentifiabilityReport", "hessian_fd", "wald_intervals",
@@ -121,7 +121,7 @@ def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step:
 
     Parameters
     ----------
-    problem : GreyboxProblem
+    problem : LikelihoodProblem
     eta : array_like
     free : array_like of bool, optional
         Coordinates to differentiate (default: the layout's free ones).
@@ -238,7 +238,7 @@ def profile_likelihood(problem, eta, name: str, level: float = 0.9, *, step: flo
 
     Parameters
     ----------
-    problem : GreyboxProblem
+    problem : LikelihoodProblem
     eta : array_like
         The optimum.
     name : str
@@ -337,7 +337,7 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
 
     Parameters
     ----------
-    estimator : GreyboxEstimator
+    estimator : LikelihoodEstimator
         Fitted with ``criterion="likelihood"``.
     params : sequence of str
         Parameters to profile (others get Wald intervals only). With ``per_edge=True``

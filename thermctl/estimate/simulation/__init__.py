@@ -1,4 +1,4 @@
-r"""Parameter estimation of the convection edges (paper section III-B).
+r"""The paper's simulation criterion J for the convection edges (paper section III-B).
 
 The paper's prediction cost (eq. 3),
 
@@ -10,11 +10,10 @@ simulated from the first sample of a window (default 12 h) with the measured inp
 is minimised over ``rbar_v`` [K/(W m)] and ``c_v`` [J/K] subject to
 ``t_min/alpha <= rbar_v·c_v <= t_max/alpha``.
 
-* :class:`EstimationData` — a block of data (from arrays or a ``T:/Ts:/ms:/Q:`` table).
 * :class:`CostProblem` — window, zone subset, initial-state handling
   (``paper``, ``burn_in``, ``estimate``, ``given``), parameters and bounds; ``cost()``.
 * :func:`grid_search` — the paper's exhaustive search, the reference.
-* :func:`fit` / :class:`ConvectionEstimator` — IPOPT: multiple shooting (default; nodes
+* :func:`fit` / :class:`SimulationEstimator` — IPOPT: multiple shooting (default; nodes
   every hour, the problem's simulator between them), single shooting (the fast path), or
   a pure-CasADi Radau NLP (``casadi_radau``, inspectable).
 * :class:`ExactSimulator` (exact ZOH, the reference) and :class:`RadauSimulator` (sparse,
@@ -25,7 +24,8 @@ Every callable that works for a while takes ``progress(stage, done, total)``.
 
 Examples
 --------
->>> from thermctl.estimate import EstimationData, CostProblem, grid_search, fit
+>>> from thermctl.estimate import EstimationData
+>>> from thermctl.estimate.simulation import CostProblem, grid_search, fit
 >>> data = EstimationData.from_frame(df, net)                      # doctest: +SKIP
 >>> prob = CostProblem(net, data, initial_state="estimate")        # doctest: +SKIP
 >>> grid = grid_search(prob)                                       # doctest: +SKIP
@@ -34,22 +34,20 @@ Examples
 True
 """
 
-from .fit import METHODS, ConvectionEstimator, fit
+from .fit import METHODS, SimulationEstimator, fit
 from .grid import grid_search
 from .identifiability import identifiability_report
 from .nlp import IPOPT_DEFAULTS, CasadiMultipleShootingNLP, SingleShootingNLP
 from .radau import RadauSimulator
 from .shooting import MultipleShootingNLP
-from .problem import (INITIAL_STATES, RBAR_BOUNDS, T_MAX, T_MIN, CostProblem,
-                      EstimationData)
-from .result import EstimationResult, GridResult, IdentifiabilityReport, ParameterProfile
+from .problem import INITIAL_STATES, CostProblem
+from .result import EstimationResult, GridResult, ProfileReport, ParameterProfile
 from .sim import CostEval, ExactSimulator, Simulator
 
 __all__ = [
-    "EstimationData", "CostProblem", "grid_search", "fit", "ConvectionEstimator",
+    "CostProblem", "grid_search", "fit", "SimulationEstimator",
     "identifiability_report", "Simulator", "ExactSimulator", "RadauSimulator", "CostEval",
     "MultipleShootingNLP", "CasadiMultipleShootingNLP", "SingleShootingNLP",
-    "EstimationResult", "GridResult", "IdentifiabilityReport", "ParameterProfile",
+    "EstimationResult", "GridResult", "ProfileReport", "ParameterProfile",
     "IPOPT_DEFAULTS", "INITIAL_STATES", "METHODS",
-    "T_MIN", "T_MAX", "RBAR_BOUNDS",
 ]

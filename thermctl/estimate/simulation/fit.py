@@ -8,14 +8,16 @@ import warnings
 
 import numpy as np
 
-from .._blas import single_thread_blas
-from ..errors import BoundWarning, ConvergenceWarning, EstimationError
-from ..model import ThermalModel
+from ..._blas import single_thread_blas
+from ...errors import BoundWarning, ConvergenceWarning, EstimationError
+from ...model import ThermalModel
 from .identifiability import identifiability_report
-from .problem import RBAR_BOUNDS, T_MAX, T_MIN, CostProblem, EstimationData
+from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
+from ..data import EstimationData
+from .problem import CostProblem
 from .result import EstimationResult
 
-__all__ = ["fit", "ConvectionEstimator", "METHODS"]
+__all__ = ["fit", "SimulationEstimator", "METHODS"]
 
 log = logging.getLogger(__name__)
 
@@ -180,7 +182,7 @@ def _fit(problem, method, theta0, warm_start, interval, substeps, ipopt_options,
     return res
 
 
-class ConvectionEstimator:
+class SimulationEstimator:
     """Estimate the convection parameters of a network from data (paper III-B).
 
     The constructor only stores its arguments; :meth:`fit` builds the
@@ -188,6 +190,8 @@ class ConvectionEstimator:
 
     Parameters
     ----------
+    network : ThermalNetwork
+        With the convection edges to estimate.
     method, theta0, warm_start, interval, substeps, ipopt_options, identifiability,
     raise_on_failure, progress
         As :func:`fit`.
@@ -211,11 +215,11 @@ class ConvectionEstimator:
 
     Examples
     --------
-    >>> est = ConvectionEstimator(initial_state="estimate").fit(net, data)   # doctest: +SKIP
+    >>> est = SimulationEstimator(net, initial_state="estimate").fit(data)   # doctest: +SKIP
     >>> est.rbar_v_, est.c_v_                                                # doctest: +SKIP
     """
 
-    def __init__(self, method: str = "multiple_shooting", *,
+    def __init__(self, network, method: str = "multiple_shooting", *,
                  window: float = 12 * 3600.0, K_T: int | None = None, start: int | None = None,
                  zones=None, initial_state: str = "paper", burn_in: float = 24 * 3600.0,
                  per_edge: bool = False, t_min: float = T_MIN, t_max: float = T_MAX,
@@ -224,6 +228,7 @@ class ConvectionEstimator:
                  interval: float | None = None,
                  substeps: int | None = None, ipopt_options=None, identifiability: bool = True,
                  raise_on_failure: bool = False, progress=None):
+        self.network = network
         self.method = method
         self.window = window
         self.K_T = K_T
@@ -247,13 +252,11 @@ class ConvectionEstimator:
         self.raise_on_failure = raise_on_failure
         self.progress = progress
 
-    def fit(self, network, data, x0=None) -> "ConvectionEstimator":
+    def fit(self, data, x0=None) -> "SimulationEstimator":
         """Fit to ``data``.
 
         Parameters
         ----------
-        network : ThermalNetwork
-            With the convection edges to estimate.
         data : EstimationData, pandas.DataFrame or thermctl.data.Measurements
             A table is read with :meth:`EstimationData.from_frame`.
         x0 : array_like, optional
@@ -263,6 +266,7 @@ class ConvectionEstimator:
         -------
         self
         """
+        network = self.network
         if not isinstance(data, EstimationData):
             data = EstimationData.from_frame(data, network)
         self.problem_ = CostProblem(

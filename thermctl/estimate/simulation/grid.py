@@ -9,8 +9,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .._blas import single_thread_blas
-from ..errors import BoundWarning, EstimationError
+from ..._blas import single_thread_blas
+from ...errors import BoundWarning, EstimationError
 from .result import GridResult
 from .sim import ExactSimulator
 

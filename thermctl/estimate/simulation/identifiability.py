@@ -21,7 +21,7 @@ import math
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .result import IdentifiabilityReport, ParameterProfile
+from .result import ProfileReport, ParameterProfile
 
 __all__ = ["identifiability_report", "PROFILE_FACTORS"]
 
@@ -106,7 +106,7 @@ def _crossing(log_f, rise, thr):
 
 
 def identifiability_report(problem, eta_hat, J_hat: float | None = None, *, solver=None,
-                           factors=PROFILE_FACTORS, progress=None) -> IdentifiabilityReport:
+                           factors=PROFILE_FACTORS, progress=None) -> ProfileReport:
     """Profiles of J along each parameter and the Hessian's eigenvalues in log space.
 
     Parameters
@@ -126,7 +126,7 @@ def identifiability_report(problem, eta_hat, J_hat: float | None = None, *, solv
 
     Returns
     -------
-    IdentifiabilityReport
+    ProfileReport
     """
     from .nlp import SingleShootingNLP
 
@@ -176,7 +176,7 @@ def identifiability_report(problem, eta_hat, J_hat: float | None = None, *, solv
         profiles[name] = ParameterProfile(name, factors, Jp, rise_decade, ci, verdict)
     text = _text(problem, eta_hat, J_hat, profiles, lam, V, cond, thr)
     log.info(text)
-    return IdentifiabilityReport(profiles, H, lam, V, cond, text, J_hat)
+    return ProfileReport(profiles, H, lam, V, cond, text, J_hat)
 
 
 def _verdict(lo, hi, bound_lo, bound_hi):

@@ -41,9 +41,9 @@ import math
 import casadi as ca
 import numpy as np
 
-from .._step import radau_residual
-from ..errors import EstimationError
-from ..model import make_stepper
+from ..._step import radau_residual
+from ...errors import EstimationError
+from ...model import make_stepper
 
 __all__ = ["CasadiMultipleShootingNLP", "SingleShootingNLP", "IPOPT_DEFAULTS", "radau_substeps"]
 

@@ -27,156 +27,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DataError, EstimationError
-from ..model import ThermalModel
-from ..network import ThermalNetwork
-from ._data import check_network, grid_arrays, inputs_from_frame, regular_step
+from ...errors import DataError, EstimationError
+from ...model import ConvectionParameters, ThermalModel
+from ...network import ThermalNetwork
+from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
+from ..data import EstimationData
 
-__all__ = ["EstimationData", "CostProblem", "INITIAL_STATES", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
+__all__ = ["CostProblem", "INITIAL_STATES"]
 
 log = logging.getLogger(__name__)
 
-T_MIN = 4.0
-"""Lower bound of the convective time constant per unit distance [s/m] (paper, from CFD)."""
-T_MAX = 20.0
-"""Upper bound of the convective time constant per unit distance [s/m] (paper, from CFD)."""
-RBAR_BOUNDS = (1e-6, 1e-2)
-"""Search range of rbar_v [K/(W m)] (paper IV-B)."""
 INITIAL_STATES = ("paper", "burn_in", "estimate", "given")
-
-
-@dataclass
-class EstimationData:
-    """A block of measured data on a regular time grid, as the estimator needs it.
-
-    Row ``k`` is the sample at ``t_k = t_0 + k·dt``. Inputs are held constant from one
-    sample to the next (zero-order hold), so ``U[k]`` acts over ``[t_k, t_{k+1})``.
-
-    Attributes
-    ----------
-    U : ndarray, shape (N, n_inputs)
-        Inputs in :attr:`ThermalNetwork.input_names` order: ``ms`` [kg/s], ``Ts`` [°C],
-        boundary ``T`` [°C], ``Q`` [W]. Must be finite.
-    Y : ndarray, shape (N, n_measured)
-        Measured zone temperatures [°C]; NaN marks a missing sample (left out of J).
-    dt : float
-        Sample step [s].
-    zones : list of str
-        The zone of each column of ``Y``.
-    input_names : list of str
-        Names of the columns of ``U`` (checked against the network).
-    gains_known : bool
-        Whether the ``Q`` columns hold measured/known heat gains (False: zero, as in
-        the paper, which neglects occupants and sun).
-    time : ndarray, optional
-        Time stamps of the rows (informative).
-    """
-
-    U: np.ndarray
-    Y: np.ndarray
-    dt: float
-    zones: list
-    input_names: list
-    gains_known: bool = False
-    time: np.ndarray | None = None
-
-    def __post_init__(self):
-        self.zones = [str(z) for z in self.zones]
-        self.input_names = [str(n) for n in self.input_names]
-        self.U, self.Y, self.dt = grid_arrays(self.U, self.Y, self.dt, self.zones)
-        if self.U.shape[1] != len(self.input_names):
-            raise DataError(f"U has {self.U.shape[1]} columns but {len(self.input_names)} "
-                            "input names were given")
-        if len(set(self.zones)) != len(self.zones):
-            raise DataError(f"zones listed twice in {self.zones}")
-
-    def __len__(self):
-        return self.U.shape[0]
-
-    @classmethod
-    def from_arrays(cls, network: ThermalNetwork, U, Y, dt: float, zones=None, Q=None,
-                    time=None) -> "EstimationData":
-        """Data for ``network`` from arrays.
-
-        Parameters
-        ----------
-        network : ThermalNetwork
-        U : array_like, shape (N, n_inputs)
-            Inputs in ``network.input_names`` order (see the class docstring).
-        Y : array_like, shape (N, n_measured)
-            Measured zone temperatures [°C].
-        dt : float
-            Sample step [s].
-        zones : list of str, optional
-            Zones of the columns of ``Y``; default ``network.measured_zones``.
-        Q : array_like, shape (N, n_zones), optional
-            Known heat gains [W]; written into the ``Q`` columns of ``U`` (otherwise those
-            columns are used as given and the gains count as unknown unless non-zero).
-        time : array_like, optional
-        """
-        U = np.array(U, dtype=float, copy=True)
-        zones = list(network.measured_zones if zones is None else zones)
-        sl = network.input_slices()
-        gains_known = False
-        if Q is not None:
-            Q = np.asarray(Q, dtype=float)
-            if Q.shape != (U.shape[0], network.n_zones):
-                raise DataError(f"Q: expected shape ({U.shape[0]}, {network.n_zones}) "
-                                f"(one column per zone {network.zones}), found {Q.shape}")
-            U[:, sl["Q"]] = Q
-            gains_known = True
-        elif U.ndim == 2 and U.shape[1] == network.n_inputs:
-            gains_known = bool(np.any(U[:, sl["Q"]] != 0))
-        data = cls(U, Y, dt, zones, network.input_names, gains_known, time)
-        data.check(network)
-        return data
-
-    @classmethod
-    def from_frame(cls, frame, network: ThermalNetwork, dt: float | None = None,
-                   zones=None) -> "EstimationData":
-        """Data from a table with ``T:<node>``, ``Ts:<zone>``, ``ms:<zone>``, ``Q:<zone>`` columns.
-
-        Parameters
-        ----------
-        frame : pandas.DataFrame or thermctl.data.Measurements
-            SI units: ``T`` and ``Ts`` [°C], ``ms`` [kg/s], ``Q`` [W]. A zone without
-            ``ms:`` gets no supply air (``ms = 0``); a zone without ``Q:`` gets zero gains
-            (the paper's choice). Every boundary node needs its ``T:`` column. The zones
-            with a ``T:`` column are the measured zones (unless ``zones`` is given).
-        network : ThermalNetwork
-        dt : float, optional
-            Sample step [s]; default from a regular ``DatetimeIndex`` (or the
-            ``Measurements.step``).
-        zones : list of str, optional
-            Measured zones to use.
-        """
-        if hasattr(frame, "frame") and hasattr(frame, "step"):   # thermctl.data.Measurements
-            dt = frame.step.total_seconds() if dt is None else dt
-            frame = frame.frame
-        cols = set(frame.columns)
-        n = len(frame)
-        if dt is None:
-            if not hasattr(frame.index, "asi8") or n < 2:
-                raise DataError("from_frame: give dt [s]; the table has no DatetimeIndex "
-                                "to read the step from")
-            dt = regular_step(frame.index, "from_frame")
-        U, gains_known = inputs_from_frame(frame, network)
-        if zones is None:
-            zones = [z for z in network.zones if f"T:{z}" in cols]
-        else:
-            missing = [z for z in zones if f"T:{z}" not in cols]
-            if missing:
-                raise DataError(f"zone(s) {missing} have no 'T:' column in the table")
-        Y = np.column_stack([frame[f"T:{z}"].to_numpy(float) for z in zones]) if zones \
-            else np.empty((n, 0))
-        time = frame.index.to_numpy() if hasattr(frame.index, "asi8") else None
-        data = cls(U, Y, dt, list(zones), network.input_names, gains_known, time)
-        data.check(network)
-        return data
-
-    def check(self, network: ThermalNetwork) -> None:
-        """Raise :class:`DataError` unless these data fit ``network``."""
-        check_network(self, network)
 
 
 @dataclass
@@ -317,7 +178,8 @@ class CostProblem:
         n_r = self.m if self.per_edge else 1
         self.n_eta = n_r + 1
         self.theta_ref = np.array([rbar_ref] * n_r + [tau_ref / rbar_ref])
-        names = ([f"rbar_v[{e.name}]" for e in self.network.convection_edges] if self.per_edge
+        names = ([ConvectionParameters.key(e.name) for e in self.network.convection_edges]
+                 if self.per_edge
                  else ["rbar_v"])
         self.param_names = names + ["c_v"]
         # box bounds on eta: rbar_v from rbar_bounds; c_v from what the tau bound allows

@@ -33,8 +33,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .._step import radau_d_matrix, radau_forcing, radau_n, radau_tangent
-from ..errors import EstimationError
+from ..._step import radau_d_matrix, radau_forcing, radau_n, radau_tangent
+from ...errors import EstimationError
 from .sim import Simulator
 
 __all__ = ["RadauSimulator", "default_substeps"]

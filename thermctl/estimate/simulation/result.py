@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["GridResult", "EstimationResult", "IdentifiabilityReport", "ParameterProfile"]
+__all__ = ["GridResult", "EstimationResult", "ProfileReport", "ParameterProfile"]
 
 
 @dataclass
@@ -107,7 +107,7 @@ class ParameterProfile:
 
 
 @dataclass
-class IdentifiabilityReport:
+class ProfileReport:
     """Can the data pin each parameter? Profiles of J and the log-space Hessian.
 
     Attributes
@@ -181,7 +181,7 @@ class EstimationResult:
         Starting point ``[rbar_v..., c_v]``.
     initial_state : str
     param_names : list of str
-    identifiability : IdentifiabilityReport or None
+    identifiability : ProfileReport or None
     n_variables, n_constraints : int
         Size of the NLP.
     message : str
@@ -205,7 +205,7 @@ class EstimationResult:
     theta0: np.ndarray
     initial_state: str
     param_names: list
-    identifiability: IdentifiabilityReport | None = None
+    identifiability: ProfileReport | None = None
     n_variables: int = 0
     n_constraints: int = 0
     message: str = ""

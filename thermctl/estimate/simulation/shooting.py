@@ -31,8 +31,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .._blas import single_thread_blas
-from ..errors import EstimationError
+from ..._blas import single_thread_blas
+from ...errors import EstimationError
 from .nlp import _RMS_SCALE, _ipopt_result, _ipopt_solver, _run_ipopt
 
 __all__ = ["MultipleShootingNLP", "DEFAULT_INTERVAL"]

@@ -32,8 +32,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .._blas import single_thread_blas
-from ..errors import EstimationError
+from ..._blas import single_thread_blas
+from ...errors import EstimationError
 
 __all__ = ["Simulator", "ExactSimulator", "CostEval"]
 

@@ -1,0 +1,308 @@
+"""Greedy search for a network's air paths by a model criterion (forward, backward).
+
+The search knows structures, not parameters: it asks a *scorer* for the criterion of a
+structure (``scorer.fit(edges, warm)``) and for a cheap ranking of the candidates it could
+add (``scorer.screen(edges, rest, fitted)``). Which criterion (BIC or AIC on the Kalman
+likelihood, held-back likelihood) and how a model is fitted live with the estimator
+(:class:`thermctl.estimate.likelihood.scoring.LikelihoodScorer`); the pipeline joins
+the two (:func:`thermctl.selection.select_air_paths`).
+
+Greedy search (Bacher & Madsen 2011 style):
+
+1. Fit the current structure (start: no air path, or ``start``).
+2. Screen every remaining candidate (a lower bound of its gain, everything else held).
+3. Refit the best candidate with all parameters free; accept it if the criterion
+   improves by more than ``margin``, else stop.
+4. Backward: try removing each selected edge (full refit); drop the one whose removal
+   costs least if that is less than ``margin``; repeat. When no removal is cheap enough,
+   the removal costs are recorded as a ``keep`` step: the evidence for every kept edge.
+
+Candidates are every zone pair with a known air-path length, **including pairs already
+joined by a wall** (:func:`candidate_pairs`): an open door beside a wall is an air path
+too, and a model criterion can tell a wall's conduction from mixing only by fitting both.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from ..errors import EstimationError, SpecError
+from ..network import air_path_name
+
+__all__ = ["Candidate", "SelectionStep", "SearchResult", "Scorer", "candidate_pairs",
+           "as_candidates", "search_edges", "DIRECTIONS"]
+
+DIRECTIONS = ("forward", "backward", "both")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A possible air path.
+
+    Attributes
+    ----------
+    a, b : str
+        Zones (sorted).
+    d : float
+        Air path length [m].
+    parallel : bool
+        A wall joins the same two zones (the edge would run parallel to it).
+    unmeasured : bool
+        One end is an unmeasured zone.
+    """
+
+    a: str
+    b: str
+    d: float
+    parallel: bool = False
+    unmeasured: bool = False
+
+    @property
+    def name(self) -> str:
+        return air_path_name(self.a, self.b)
+
+    @property
+    def pair(self) -> tuple:
+        return (self.a, self.b)
+
+
+@dataclass
+class SelectionStep:
+    """One decision of the search.
+
+    Attributes
+    ----------
+    action : {"start", "add", "remove", "stop", "keep"}
+        ``keep``: the backward pass ended; ``screened`` holds the criterion change of
+        removing each kept edge.
+    edge : str or None
+    value : float
+        Criterion of the structure after this step (lower is better).
+    delta : float
+        Change of the criterion this step caused (negative: better).
+    edges : list of str
+        Structure after the step.
+    screened : dict
+        Edge name → screening change of the criterion (forward steps).
+    note : str
+    """
+
+    action: str
+    edge: str | None
+    value: float
+    delta: float
+    edges: list
+    screened: dict = field(default_factory=dict)
+    note: str = ""
+
+
+@dataclass
+class SearchResult:
+    """Outcome of :func:`search_edges`.
+
+    Attributes
+    ----------
+    edges : list of Candidate
+        The selected air paths.
+    candidates : list of Candidate
+    path : list of SelectionStep
+    reasons : dict
+        Edge name → why it is in or out.
+    fitted : object
+        The scorer's fit of the selected structure.
+    value : float
+        Its criterion (lower is better).
+    """
+
+    edges: list
+    candidates: list
+    path: list
+    reasons: dict
+    fitted: object
+    value: float
+
+
+class Scorer(Protocol):
+    """What :func:`search_edges` needs of a model criterion."""
+
+    name: str
+
+    def fit(self, edges: list, warm=None) -> tuple:
+        """``(fitted, value)`` of the structure ``edges`` (warm start from ``warm``)."""
+
+    def screen(self, edges: list, rest: list, fitted) -> dict:
+        """Edge name → criterion change of adding each of ``rest`` to ``edges``, cheaply."""
+
+
+def candidate_pairs(spec, zones=None, include_unmeasured: bool = True,
+                    parallel: bool = True) -> list[Candidate]:
+    """Every zone pair that could exchange air, flagged if a wall joins it.
+
+    Pairs with a length in the spec's ``distances``, and (``parallel``) every pair joined
+    by a wall, with the length of :meth:`BuildingSpec.air_path_length` (given, or estimated
+    from the volumes: an open door in the common wall).
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+    zones : list of str, optional
+        Restrict to pairs within these zones.
+    include_unmeasured : bool
+        Also pairs with an unmeasured zone.
+    parallel : bool
+        Also pairs joined by a wall.
+    """
+    zset = set(spec.zone_names if zones is None else zones)
+    meas = set(spec.measured_zones)
+    walls = spec.wall_pairs()
+    pairs = {tuple(sorted((dd.a, dd.b))) for dd in spec.distances}
+    if parallel:
+        pairs |= {tuple(sorted(p)) for p in walls}
+    out = []
+    for a, b in sorted(pairs):
+        if a not in zset or b not in zset:
+            continue
+        unm = a not in meas or b not in meas
+        if unm and not include_unmeasured:
+            continue
+        d, _ = spec.air_path_length(a, b)
+        out.append(Candidate(a, b, float(d), frozenset((a, b)) in walls, unm))
+    return out
+
+
+def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(),
+                 max_edges: int | None = None, margin: float = 10.0,
+                 progress=None) -> SearchResult:
+    """Forward selection and/or backward elimination of air paths by ``scorer``.
+
+    Parameters
+    ----------
+    candidates : list of Candidate
+    scorer : Scorer
+    direction : {"forward", "backward", "both"}
+        ``backward`` starts from all candidates.
+    start : list of Candidate
+        In the model from the start (forward / both).
+    max_edges : int, optional
+    margin : float
+        Improvement of the criterion an edge must bring to enter (and must keep bringing
+        to stay) [-].
+    progress : callable, optional
+        ``progress(message)`` after each decision.
+
+    Returns
+    -------
+    SearchResult
+    """
+    if direction not in DIRECTIONS:
+        raise EstimationError(f"direction must be one of {DIRECTIONS}, found {direction!r}")
+    cands = list(candidates)
+    by_name = {c.name: c for c in cands}
+    crit = scorer.name
+    cur = list(cands) if direction == "backward" else list(start)
+    fitted, val = scorer.fit(cur)
+    path = [SelectionStep("start", None, val, 0.0, [c.name for c in cur],
+                          note=f"{len(cur)} edge(s)")]
+    reasons, best_screen = {}, {}
+    say = progress or (lambda msg: None)
+    if direction in ("forward", "both"):
+        while max_edges is None or len(cur) < max_edges:
+            rest = [c for c in cands if c not in cur]
+            if not rest:
+                break
+            screened = scorer.screen(cur, rest, fitted)
+            best_screen.update(screened)        # the last round's value: with the final edges
+            pick = min(screened, key=screened.get)
+            c = by_name[pick]
+            f_full, v_full = scorer.fit(cur + [c], warm=fitted)
+            d = v_full - val
+            if d < -margin:
+                cur = cur + [c]
+                fitted, val = f_full, v_full
+                path.append(SelectionStep("add", pick, val, d, [x.name for x in cur], screened,
+                                          note=scorer.describe(c, f_full)
+                                          if hasattr(scorer, "describe") else ""))
+                reasons[pick] = f"added: {crit} {d:+.1f} when added"
+                say(f"added {pick} ({crit} {d:+.1f})")
+            else:
+                path.append(SelectionStep("stop", pick, val, d, [x.name for x in cur], screened,
+                                          note=f"best candidate improves the criterion by less "
+                                               f"than the margin {margin:g}"))
+                say(f"stop: best candidate {pick} gives {crit} {d:+.1f}")
+                break
+    if direction in ("backward", "both"):
+        while cur:
+            trials = {}
+            for c in cur:
+                f2, v2 = scorer.fit([x for x in cur if x != c], warm=fitted)
+                trials[c.name] = (v2 - val, f2, v2)
+            pick = min(trials, key=lambda k: trials[k][0])
+            d, f2, v2 = trials[pick]
+            if d < margin:
+                cur = [x for x in cur if x.name != pick]
+                fitted, val = f2, v2
+                path.append(SelectionStep("remove", pick, val, d, [x.name for x in cur],
+                                          {k: t[0] for k, t in trials.items()},
+                                          note=f"it improves the criterion by less than the "
+                                               f"margin {margin:g}"))
+                reasons[pick] = (f"removed: {crit} only {d:+.1f} when removed "
+                                 f"(margin {margin:g})")
+                say(f"removed {pick} ({crit} {d:+.1f})")
+            else:
+                # the kept structure's evidence: what removing each edge would cost
+                path.append(SelectionStep("keep", None, val, d, [x.name for x in cur],
+                                          {k: t[0] for k, t in trials.items()},
+                                          note=f"removing any edge costs more than the "
+                                               f"margin {margin:g}"))
+                for k, t in trials.items():
+                    if k not in reasons or reasons[k].startswith("added"):
+                        reasons[k] = (reasons.get(k, "in") + f"; removing it costs {crit} "
+                                      f"{t[0]:+.1f}")
+                break
+    for c in cands:
+        if c.name not in reasons:
+            if c in cur:
+                reasons[c.name] = "in (start)"
+            elif c.name in best_screen:
+                reasons[c.name] = (f"out: last screening {crit} change "
+                                   f"{best_screen[c.name]:+.1f}")
+            else:
+                reasons[c.name] = "out"
+        if c.parallel:
+            reasons[c.name] += " [parallel to a wall]"
+        if c.unmeasured:
+            reasons[c.name] += " [unmeasured end]"
+    return SearchResult(cur, cands, path, reasons, fitted, val)
+
+
+def as_candidates(spec, candidates=None) -> list:
+    """:class:`Candidate` objects from ``None`` (every :func:`candidate_pairs`), or from
+    ``Candidate`` / ``(a, b[, d])`` items (``d`` from the spec where not given)."""
+    if candidates is None:
+        out = candidate_pairs(spec)
+    else:
+        out = [_cand(spec, c) for c in candidates]
+    if not out:
+        raise SpecError(f"{spec.source}: no candidate air path (the spec lists no distances)")
+    return out
+
+
+def _name(e):
+    if isinstance(e, Candidate):
+        return e.name
+    return air_path_name(e[0], e[1])
+
+
+def _cand(spec, e):
+    if isinstance(e, Candidate):
+        return e
+    a, b = sorted((str(e[0]), str(e[1])))
+    d = float(e[2]) if len(e) > 2 else spec.air_path_length(a, b)[0]
+    if d is None:
+        raise SpecError(f"candidate {a}-{b}: the spec gives no distance for this pair and no "
+                        "wall joins it (add it under 'distances')")
+    walls = spec.wall_pairs()
+    meas = set(spec.measured_zones)
+    return Candidate(a, b, d, frozenset((a, b)) in walls, a not in meas or b not in meas)
