@@ -12,7 +12,12 @@ inputs and the identified state estimator.
   zone, continuous process-noise intensity, sensor-noise variance and, at a sample time,
   the stationary Kalman gain.
 
-``thermctl export`` writes all three into the exported files.
+``thermctl export`` writes all three into the exported files. For control toolboxes:
+
+* :func:`to_do_mpc` builds do-mpc models (bilinear, and linear at the operating point);
+* :func:`load_statespace` reads an exported state space as an :class:`OperatingStateSpace`,
+  a ``control.StateSpace`` that prints its operating point; :func:`input_signals` makes a
+  ``forced_response`` input array from signals given by name.
 
 Examples
 --------
@@ -29,6 +34,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+import casadi as ca
 import control as ct
 import numpy as np
 import scipy.linalg as sla
@@ -37,7 +43,8 @@ from .errors import ModelError
 from .model import OperatingPoint, ThermalModel, zoh
 
 __all__ = ["ExportPoint", "Disturbances", "KalmanFilter", "supply_zones", "typical_inputs",
-           "export_point", "disturbances", "statespace", "kalman_filter"]
+           "export_point", "disturbances", "statespace", "kalman_filter", "DoMpcModels",
+           "to_do_mpc", "OperatingStateSpace", "load_statespace", "input_signals"]
 
 _ON = 1e-6          # [kg/s]: a box "supplies air" above this flow (logged zeros are 0.0 or tiny)
 _DEFAULTS = {"ms": 0.0, "Ts": 20.0, "T": 10.0, "Q": 0.0}   # ThermalNetwork.input_vector's
@@ -516,3 +523,333 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
         K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
         kf.dt, kf.Phi, kf.Gamma, kf.Qd, kf.P, kf.K = float(dt), Phi, Gam @ B, Qd, P, K
     return kf
+
+
+# ---------------------------------------------------------------------------- do-mpc
+@dataclass
+class DoMpcModels:
+    """The identified model as do-mpc models: bilinear, and linear at an operating point.
+
+    Both are continuous and have the same variable names: states ``T[z]``, ``x[e,1]``...
+    (:attr:`ThermalNetwork.state_names`), inputs ``ms[z]`` [kg/s] and ``Ts[z]`` [°C] of the
+    zones with supply air, time-varying parameters ``T[b]`` [°C] (boundary temperatures),
+    ``Q[z]`` [W] (measured heat) and the identified disturbances :attr:`Disturbances.names`
+    (``solar[...]`` [W/m²], ``gain[...]`` [-]).
+
+    Attributes
+    ----------
+    model : do_mpc.model.Model
+        ``dT/dt = f(x, u, tvp)``: bilinear in supply flow and temperatures, set up.
+    linear : do_mpc.model.LinearModel or None
+        ``d(Δx)/dt = A Δx + B Δu + B_tvp Δtvp`` in deviations from :attr:`op` (every variable
+        is the deviation from its value at ``op``, as in do-mpc's own ``linearize``), set up;
+        ``None`` without an operating point.
+    states, inputs, tvp : list of str
+    op : OperatingPoint or None
+    x_op, u_op, tvp_op : dict
+        Values at ``op`` by name [°C, kg/s, W; disturbances 0].
+    """
+
+    model: object
+    linear: object
+    states: list
+    inputs: list
+    tvp: list
+    op: OperatingPoint | None = None
+    x_op: dict = field(default_factory=dict)
+    u_op: dict = field(default_factory=dict)
+    tvp_op: dict = field(default_factory=dict)
+
+    def tvp_fun(self, user, values: Mapping | None = None):
+        """A ``tvp_fun`` for a do-mpc MPC or Simulator built on :attr:`model` or :attr:`linear`.
+
+        Parameters
+        ----------
+        user : do_mpc.controller.MPC or do_mpc.simulator.Simulator
+            Set up far enough to have ``get_tvp_template`` (``set_param`` called).
+        values : mapping, optional
+            ``{tvp name: value or callable(t [s]) -> value}`` in absolute units [°C, W,
+            W/m², -]; names not given keep :attr:`tvp_op`. For :attr:`linear` the deviation
+            from :attr:`tvp_op` is passed on.
+
+        Returns
+        -------
+        callable
+            ``tvp_fun(t_now)`` to give to ``user.set_tvp_fun``.
+        """
+        values = dict(values or {})
+        unknown = sorted(set(values) - set(self.tvp))
+        if unknown:
+            raise ModelError(f"tvp_fun: unknown time-varying parameter(s) {unknown}; the model "
+                             f"has {self.tvp}")
+        linear = getattr(user, "model", None) is self.linear and self.linear is not None
+        tpl = user.get_tvp_template()
+        horizon = getattr(user, "settings", None)
+        n = getattr(horizon, "n_horizon", None)
+        dt = getattr(horizon, "t_step", None)
+
+        def value(name, t):
+            v = values.get(name, self.tvp_op.get(name, 0.0))
+            v = float(v(t)) if callable(v) else float(v)
+            return v - self.tvp_op.get(name, 0.0) if linear else v
+
+        def fun(t_now):
+            for name in self.tvp:
+                if n is None:                    # Simulator: one value
+                    tpl[name] = value(name, t_now)
+                else:                            # MPC: one value per step of the horizon
+                    for k in range(n + 1):
+                        tpl["_tvp", k, name] = value(name, t_now + k * dt)
+            return tpl
+        return fun
+
+
+def _do_mpc():
+    try:
+        import do_mpc
+    except ImportError:
+        raise ImportError("thermctl.export.to_do_mpc needs do-mpc: pip install "
+                          "'thermctl[do-mpc]'") from None
+    return do_mpc
+
+
+def to_do_mpc(model: ThermalModel, op=None, *, supply_zones=None) -> DoMpcModels:
+    """The identified model as a ready do-mpc model, and its linearization at ``op``.
+
+    .. math::
+
+        \\dot T_z = \\frac{1}{C_z}\\Big(\\sum_j \\frac{T_j - T_z}{R_{zj}}
+        + \\dot m_z c_p (T_{s,z} - T_z) + Q_z + \\sum_k h_{zk} d_k\\Big)
+
+    with the wall and air-path states of the network, the supply flow ``ms[z]`` and
+    temperature ``Ts[z]`` as inputs (the product makes the model bilinear) and the
+    boundary temperatures, heat ``Q[z]`` and identified disturbances ``d`` (solar
+    irradiance through the fitted apertures ``h`` [m²], time-of-day gains ``h`` [W]) as
+    time-varying parameters. The parameters (R̄_v, C_v) are built in.
+
+    Parameters
+    ----------
+    model : ThermalModel
+    op : OperatingPoint or ExportPoint, optional
+        Linearization point (:func:`export_point`); without it :attr:`DoMpcModels.linear`
+        is ``None``.
+    supply_zones : list of str, optional
+        Zones whose ``ms``/``Ts`` are inputs (the others get no supply air). Default: the
+        ``ExportPoint``'s zones with supply air when known, else the measured zones.
+
+    Returns
+    -------
+    DoMpcModels
+
+    Raises
+    ------
+    ImportError
+        do-mpc is not installed (``pip install 'thermctl[do-mpc]'``).
+    ModelError
+        An unknown zone in ``supply_zones``.
+
+    Examples
+    --------
+    >>> dm = to_do_mpc(model, export_point(model, {"ms": 0.05, "Ts": 30, "T": 21}))  # doctest: +SKIP
+    >>> mpc = do_mpc.controller.MPC(dm.model)                                    # doctest: +SKIP
+    """
+    do_mpc = _do_mpc()
+    net = model.network
+    if isinstance(op, ExportPoint):
+        fed = op.supply_zones if supply_zones is None else supply_zones
+        op = op.op
+    else:
+        fed = supply_zones
+    fed = list(net.spec.measured_zones if fed is None else fed)
+    unknown = sorted(set(fed) - set(net.zones))
+    if unknown:
+        raise ModelError(f"supply_zones: {unknown} are not zones of the model {net.zones}")
+    fed = [z for z in net.zones if z in fed]              # model order
+    dist = disturbances(model)
+    sl = net.input_slices()
+    heat = np.zeros((net.n_zones, len(dist.names)))       # [W per unit of d]
+    zi = {z: i for i, z in enumerate(net.zones)}
+    for j, name in enumerate(dist.names):
+        for z, h in dist.heat[name].items():
+            heat[zi[z], j] = h
+    inputs = [f"ms[{z}]" for z in fed] + [f"Ts[{z}]" for z in fed]
+    tvp = [f"T[{b}]" for b in net.boundary] + [f"Q[{z}]" for z in net.zones] + list(dist.names)
+    states = list(net.state_names)
+    p = model.p
+
+    def build(m, rhs_of):
+        x = ca.vertcat(*[m.set_variable("_x", n) for n in states])
+        u = {n: m.set_variable("_u", n) for n in inputs}
+        w = {n: m.set_variable("_tvp", n) for n in tvp}
+        xdot = rhs_of(x, u, w)
+        for i, n in enumerate(states):
+            m.set_rhs(n, xdot[i])
+        m.setup()
+        return m
+
+    def full_u(u, w, zero):
+        """The network's input vector from do-mpc's inputs and tvp (disturbances as heat)."""
+        ms = [u.get(f"ms[{z}]", zero) for z in net.zones]
+        Ts = [u.get(f"Ts[{z}]", zero) for z in net.zones]
+        d = ca.vertcat(*[w[n] for n in dist.names]) if dist.names else None
+        Q = [w[f"Q[{z}]"] + (ca.mtimes(ca.DM(heat[i:i + 1, :]), d) if d is not None else 0)
+             for i, z in enumerate(net.zones)]
+        parts = {"ms": ms, "Ts": Ts, "T": [w[f"T[{b}]"] for b in net.boundary], "Q": Q}
+        out = [None] * net.n_inputs
+        for key, vals in parts.items():
+            for k, idx in enumerate(range(sl[key].start, sl[key].stop)):
+                out[idx] = vals[k]
+        return ca.vertcat(*out)
+
+    f = model.sym.f
+    bilinear = build(do_mpc.model.Model("continuous", "SX"),
+                     lambda x, u, w: f(x, full_u(u, w, ca.SX(0)), p))
+    out = DoMpcModels(bilinear, None, states, inputs, tvp)
+    if op is None:
+        return out
+    ms_op = np.asarray(op.u, float)[sl["ms"]]
+    stray = [z for z, v in zip(net.zones, ms_op) if v > _ON and z not in fed]
+    if stray:
+        raise ModelError(f"op: supply flow at zone(s) {stray}, which are not supply_zones {fed}; "
+                         "add them to supply_zones or set their ms to 0")
+    A, B = model.jacobians(op)
+    idx = {n: i for i, n in enumerate(net.input_names)}
+    Bu = B[:, [idx[n] for n in inputs]]
+    Bw = np.hstack([B[:, [idx[n] for n in tvp[:len(net.boundary) + net.n_zones]]],
+                    B[:, [idx[f"Q[{z}]"] for z in net.zones]] @ heat])
+
+    def lin_rhs(x, u, w):
+        du = ca.vertcat(*[u[n] for n in inputs]) if inputs else ca.SX(0, 1)
+        dw = ca.vertcat(*[w[n] for n in tvp])
+        return ca.mtimes(ca.DM(A), x) + ca.mtimes(ca.DM(Bu), du) + ca.mtimes(ca.DM(Bw), dw)
+
+    out.linear = build(do_mpc.model.LinearModel("continuous", "SX"), lin_rhs)
+    u_all = dict(zip(net.input_names, np.asarray(op.u, float)))
+    out.op = op
+    out.x_op = dict(zip(states, np.asarray(op.x, float).tolist()))
+    out.u_op = {n: float(u_all[n]) for n in inputs}
+    out.tvp_op = {n: float(u_all.get(n, 0.0)) for n in tvp}
+    return out
+
+
+# ---------------------------------------------------------------------------- python-control
+_UNIT_OF = {"ms": "kg/s", "Ts": "°C", "T": "°C", "Q": "W", "solar": "W/m²", "gain": "-"}
+
+
+class OperatingStateSpace(ct.StateSpace):
+    """A ``control.StateSpace`` that knows the operating point it is linearized at.
+
+    It is a ``StateSpace`` (``ct.step_response(sys)``, ``sys["T[r240]", "ms[r240]"]``...)
+    in deviations from the operating point; ``print(sys)`` shows the matrices and then
+    the operating point. Made by :func:`load_statespace`.
+
+    Attributes
+    ----------
+    x_op : ndarray, shape (nstates,)
+        State at the operating point [°C].
+    u_op : ndarray, shape (ninputs,)
+        Inputs at the operating point [kg/s, °C, W; disturbance inputs 0].
+    info : dict
+        What ``thermctl export`` stored: the operating point with the source of every
+        value, the disturbance inputs.
+    kalman : dict
+        The identified Kalman filter's arrays, if exported.
+    """
+
+    def __init__(self, sys, x_op=None, u_op=None, info=None, kalman=None):
+        super().__init__(sys)
+        self.x_op = np.zeros(sys.nstates) if x_op is None else np.asarray(x_op, float)
+        u = np.zeros(sys.ninputs)
+        if u_op is not None:
+            u[:len(u_op)] = np.asarray(u_op, float)     # disturbance inputs: 0 at the point
+        self.u_op = u
+        self.info = dict(info or {})
+        self.kalman = dict(kalman or {})
+
+    def operating_point(self) -> dict:
+        """``{signal name: value}`` of the inputs and states at the operating point."""
+        return {**dict(zip(self.input_labels, self.u_op.tolist())),
+                **dict(zip(self.state_labels, self.x_op.tolist()))}
+
+    def describe_operating_point(self) -> str:
+        """The operating point as lines: inputs with unit and source, then zone temperatures."""
+        src = (self.info.get("operating_point") or {}).get("source", {})
+        lines = ["operating point (the model is in deviations from it):"]
+        for name, v in zip(self.input_labels, self.u_op):
+            kind, _, node = name.partition("[")
+            node = node.rstrip("]")
+            how = (src.get(kind) or {}).get(node)
+            lines.append(f"  {name} = {v:.6g} {_UNIT_OF.get(kind, '')}"
+                         + (f" ({how})" if how else ""))
+        zones = [(n, v) for n, v in zip(self.state_labels, self.x_op) if n.startswith("T[")]
+        lines.append("  state: " + ", ".join(f"{n} = {v:.4g} °C" for n, v in zones)
+                     + f" (+ {self.nstates - len(zones)} wall and air-path states)")
+        return "\n".join(lines)
+
+    def __str__(self):
+        return super().__str__() + "\n\n" + self.describe_operating_point()
+
+
+def load_statespace(path) -> OperatingStateSpace:
+    """Load a state-space file of ``thermctl export --statespace`` as a named system.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.npz`` written by ``thermctl export`` (or :func:`thermctl.io.save_statespace`).
+
+    Returns
+    -------
+    OperatingStateSpace
+        Signal names ``T[z]``, ``ms[z]``..., ``dt`` (0: continuous, else the sample time
+        [s]), the operating point (printed with the system), the stored info and Kalman
+        filter.
+
+    Examples
+    --------
+    >>> sys = thermctl.load_statespace("ss.npz")                      # doctest: +SKIP
+    >>> print(sys)                   # matrices, then the operating point  # doctest: +SKIP
+    >>> ct.step_response(sys["T[r240]", "ms[r240]"], 6 * 3600)       # doctest: +SKIP
+    """
+    from .io import load_statespace as _load
+
+    sys, extras = _load(path)
+    return OperatingStateSpace(sys, extras.get("x_op"), extras.get("u_op"),
+                               extras.get("info"), extras.get("kalman"))
+
+
+def input_signals(sys, timepts, values: Mapping) -> np.ndarray:
+    """An input array for ``control.forced_response`` from signals given by name.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+    timepts : array_like, shape (nt,)
+        Time points [s].
+    values : mapping
+        ``{input name: number or array of shape (nt,)}`` in the system's units (for an
+        exported model: deviations from the operating point); inputs not named are 0.
+
+    Returns
+    -------
+    ndarray, shape (ninputs, nt)
+
+    Examples
+    --------
+    >>> T = np.arange(0, 86400, 600.0)                                    # doctest: +SKIP
+    >>> U = input_signals(sys, T, {"ms[r240]": 0.02, "T[outside]": -3.0})   # doctest: +SKIP
+    >>> ct.forced_response(sys, T, U).to_pandas()                         # doctest: +SKIP
+    """
+    t = np.asarray(timepts, float)
+    names = list(sys.input_labels)
+    unknown = sorted(set(values) - set(names))
+    if unknown:
+        raise ModelError(f"input_signals: unknown input(s) {unknown}; {sys.name} has {names}")
+    U = np.zeros((len(names), t.size))
+    for name, v in values.items():
+        v = np.asarray(v, float)
+        if v.ndim and v.shape != t.shape:
+            raise ModelError(f"input_signals: {name} has shape {v.shape}, expected {t.shape} "
+                             "(one value per time point) or a number")
+        U[names.index(name)] = v
+    return U
