@@ -59,7 +59,7 @@ import pandas as pd
 
 from thermctl.spec import RHO_AIR
 
-__all__ = ["J_PER_KWH", "ComfortBand", "HVACModel", "Forecast", "MPCSolution",
+__all__ = ["J_PER_KWH", "ComfortBand", "HVACModel", "Forecast", "Tariff", "MPCSolution",
            "RecedingHorizonMPC", "ClosedLoopResult", "kpis", "kpi_table", "format_table",
            "plot_closed_loop", "save_outputs", "example_parser"]
 
@@ -235,6 +235,9 @@ class Forecast:
         Occupied mode: supply at least the ventilation minimum.
     lo, hi : ndarray, shape (N,)
         Comfort band at the end of each step [°C].
+    tariff : Tariff, optional
+        Prices over the horizon (the linear MPC then minimises cost instead of site
+        energy); None: every kWh of site energy costs 1.
     """
 
     T_boundary: np.ndarray
@@ -244,9 +247,38 @@ class Forecast:
     hvac_on: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
+    tariff: "Tariff | None" = None
 
     def __len__(self) -> int:
         return len(self.T_c)
+
+
+@dataclass
+class Tariff:
+    """What the next ``N`` steps of energy cost (see :mod:`mpc_examples.demand_response`).
+
+    Attributes
+    ----------
+    elec : ndarray, shape (N,)
+        Price of electricity (fan, chiller) [$/kWh].
+    heat : ndarray, shape (N,)
+        Price of delivered heat (boiler fuel) [$/kWh of fuel].
+    demand : float
+        Demand charge for the horizon's peak electric power [$/kW] (0: none).
+    peak_floor : float
+        Peak already reached in the billing period [kW]: the charge only sees more.
+    elec_cap : ndarray, shape (N,)
+        Electric power limit [kW] (``inf``: none), e.g. a demand-response event.
+    cap_penalty : float
+        Price of power above ``elec_cap`` [$/kWh] (soft: the fan minimum must run).
+    """
+
+    elec: np.ndarray
+    heat: np.ndarray
+    demand: float = 0.0
+    peak_floor: float = 0.0
+    elec_cap: np.ndarray | None = None
+    cap_penalty: float = 50.0
 
 
 @dataclass

@@ -56,6 +56,7 @@ from scipy import sparse
 from thermctl.model import ThermalModel
 
 from .common import Forecast, HVACModel, MPCSolution, RecedingHorizonMPC
+from .sparse import TRANSCRIPTIONS, at_flow, step_rows
 
 __all__ = ["LinearWeights", "LinearMPC", "main"]
 
@@ -117,23 +118,39 @@ class LinearMPC(RecedingHorizonMPC):
 
     def __init__(self, model: ThermalModel, hvac: HVACModel, comfort_zones, dt: float = 900.0,
                  horizon: int = 24, solver: str = "piqp", weights: LinearWeights = LinearWeights(),
-                 iterations: int = 1, T_c0: float = 12.8):
+                 iterations: int = 1, T_c0: float = 12.8, transcription: str = "radau",
+                 tariff: bool = False):
         if int(iterations) != iterations or iterations < 1:
             raise ValueError(f"iterations must be a positive integer, found {iterations!r}")
+        if transcription not in TRANSCRIPTIONS:
+            raise ValueError(f"transcription must be one of {TRANSCRIPTIONS}, found {transcription!r}")
         super().__init__(model, hvac, comfort_zones, dt, horizon, weights)
         self.iterations = int(iterations)
         self.solver_name = solver
+        self.transcription = transcription
+        self.tariff = bool(tariff)
         t0 = time.perf_counter()
         self.systems = {on: self._export(on, T_c0) for on in (True, False)}
+        self.stages = self.systems[True]["L"].shape[0] // model.network.n_states
+        self._unify()
         self._qp = self._pattern = None
         self.n_variables = self._layout()["n"]
+        self.n_nonzeros = None   # of the QP's H and A, known after the first solve
         self.build_time = time.perf_counter() - t0
 
-    # ---- the exported linear models ------------------------------------------
+    # ---- the step rows at the two base flows ---------------------------------
     def _export(self, on: bool, T_c0: float) -> dict:
-        """``x+ = A x + B_Ts Ts + B_T T_b + B_Q Q + c`` at the mode's base flow."""
+        """``L x+ = A x + B_Ts Ts + B_T T_b + B_Q Q + c`` at the mode's base flow.
+
+        ``zoh``: the exported discrete ``StateSpace`` (``L = I``); the others: the step rows
+        of :func:`mpc_examples.sparse.step_rows` from the continuous sparse matrices.
+        """
         net = self.model.network
         m_lo = np.asarray(self.hvac.ms_min, float) if on else np.zeros(net.n_zones)
+        if self.transcription != "zoh":
+            r = step_rows(at_flow(self.model, m_lo), self.dt, self.transcription)
+            return {"L": r.L, "A": r.N, "B_Ts": r.B_Ts, "B_T": r.B_T, "B_Q": r.B_Q,
+                    "c": np.zeros(r.L.shape[0]), "ms": m_lo}
         op = self.model.operating_point(ms=dict(zip(self.zones, m_lo)), Ts=T_c0, T=15.0, Q=0.0)
         sys = self.model.to_statespace(op, dt=self.dt)
         labels = list(sys.input_labels)
@@ -144,23 +161,45 @@ class LinearMPC(RecedingHorizonMPC):
         # the ms columns drop out (their deviation is always zero)
         used = cols["Ts"] + cols["T"] + cols["Q"]
         c = op.x - A @ op.x - B[:, used] @ op.u[used]
-        return {"A": A, "B_Ts": B[:, cols["Ts"]], "B_T": B[:, cols["T"]], "B_Q": B[:, cols["Q"]],
-                "c": c, "ms": m_lo, "sys": sys, "op": op}
+        return {"L": np.eye(net.n_states), "A": A, "B_Ts": B[:, cols["Ts"]], "B_T": B[:, cols["T"]],
+                "B_Q": B[:, cols["Q"]], "c": c, "ms": m_lo, "sys": sys, "op": op}
+
+    def _unify(self):
+        """Triplets of ``L``, ``A`` and ``B_Q E`` on one pattern for both modes (explicit
+        zeros kept), so the QP's sparsity never changes and one solver serves every step."""
+        nz, ns = len(self.zones), len(self.sup)
+        E = sparse.lil_matrix((nz, self.NU * ns))   # u_k [kW] → heat per zone [W]
+        for j, sign in enumerate((1e3, 1e3, -1e3)):
+            E[self.sup, j * ns + np.arange(ns)] = sign
+        E = sparse.csr_matrix(E)
+        on, off = self.systems[True], self.systems[False]
+        for s in (on, off):
+            s["G"] = sparse.csr_matrix(s["B_Q"]) @ E
+        for key in ("L", "A", "G"):
+            Ma, Mb = sparse.csr_matrix(on[key]), sparse.csr_matrix(off[key])
+            P = (abs(Ma) + abs(Mb)).tocoo()
+            r, c = P.row, P.col
+            for s, M in ((on, Ma), (off, Mb)):
+                s[key + "_t"] = (r, c, np.asarray(M[r, c]).ravel())
 
     # ---- QP (sparse: states stay decision variables) -----------------------------
     NU = 3  # inputs per box and step: q_r (reheat at base flow), q_x (hot air), q_c (cold air)
 
     def _layout(self):
-        """Offsets of the QP's variable blocks: U (inputs), X (states 1..N), S (comfort
-        slacks), CC / CH (coil cooling / preheat)."""
+        """Offsets of the QP's variable blocks: U (inputs), X (states 1..N, each after its
+        Radau stage state if any), S (comfort slacks), CC / CH (coil cooling / preheat), MF
+        (extra supply flow), EX (electric power above the cap), PK (peak electric power)."""
         N, ns, nc = self.N, len(self.sup), len(self.comfort_idx)
         nx, nu = self.model.network.n_states, self.NU * ns
         iX = nu * N
-        iS = iX + nx * N
+        iS = iX + self.stages * nx * N
         iCC = iS + nc * N
         iCH = iCC + N
-        return {"nu": nu, "nx": nx, "U": 0, "X": iX, "S": iS, "CC": iCC, "CH": iCH,
-                "n": iCH + N}
+        iMF = iCH + N
+        iEX = iMF + N
+        iPK = iEX + N * self.tariff
+        return {"nu": nu, "nx": nx, "nw": self.stages * nx, "U": 0, "X": iX, "S": iS, "CC": iCC, "CH": iCH,
+                "MF": iMF, "EX": iEX, "PK": iPK, "n": iPK + self.tariff}
 
     def _coefficients(self, fc: Forecast, T_pred):
         """LTV coefficients from predicted mid-step zone temperatures ``T_pred`` (ns, N) [°C]."""
@@ -178,12 +217,13 @@ class LinearMPC(RecedingHorizonMPC):
     def _qp_data(self, x0, fc: Forecast, T_pred, m_pred, u_prev):
         """Sparse QP ``min ½zᵀHz + gᵀz, lba ≤ Az ≤ uba, lbz ≤ z ≤ ubz`` of an MPC step.
 
-        ``z = [u_0..u_{N-1}, x_1..x_N, s, CC, CH]``: the exported system's steps are
-        equality rows ``x_{k+1} − A_k x_k − G_k u_k = e_k`` (``A_k``, ``G_k``, ``e_k`` of
-        the mode of step k), so the problem grows linearly with the horizon, and H and A
-        are as sparse as the network's discrete blocks. H and A are returned as
-        ``scipy.sparse.csc_matrix`` whose pattern does not depend on the data (explicit
-        zeros are kept), so one solver serves every step.
+        ``z = [u_0..u_{N-1}, x_1..x_N, s, CC, CH, MF, EX, PK]``: the steps are equality rows
+        ``L_k x_{k+1} − A_k x_k − G_k u_k = e_k`` (of the mode of step k; ``L = I`` for the
+        explicit forms), so the problem grows linearly with the horizon, and H and A are as
+        sparse as the step rows. The fan's quadratic model acts on the extra flow ``MF_k``
+        (one row ``MF_k = f·u_k``), which keeps H diagonal in it. H and A are returned as
+        ``scipy.sparse.csc_matrix`` whose pattern does not depend on the data (explicit zeros
+        are kept), so one solver serves every step.
         """
         hv, w = self.hvac, self.weights
         N, ns, nc = self.N, len(self.sup), len(self.comfort_idx)
@@ -193,111 +233,148 @@ class LinearMPC(RecedingHorizonMPC):
         nz = len(self.zones)
         T_c, T_o = np.asarray(fc.T_c[:N], float), np.asarray(fc.T_out[:N], float)
         on = np.asarray(fc.hvac_on[:N], bool)
+        tf = fc.tariff
+        p_el = np.ones(N) if tf is None else np.asarray(tf.elec[:N], float)
+        p_ht = np.ones(N) if tf is None else np.asarray(tf.heat[:N], float)
+        # no cap: a finite one no building reaches (a row free on both sides makes PIQP warn)
+        cap = (np.full(N, 1e6) if tf is None or tf.elec_cap is None
+               else np.minimum(np.asarray(tf.elec_cap[:N], float), 1e6))
         co = self._coefficients(fc, T_pred)
         a_c, a_x, kappa, base = co["a_c"], co["a_x"], co["kappa"], co["base"]
         ms_max = np.asarray(hv.ms_max, float)[self.sup]
-        E = np.zeros((nz, nu))   # u_k [kW] → heat per zone [W]
-        for j, sign in enumerate((1e3, 1e3, -1e3)):
-            E[self.sup, j * ns + np.arange(ns)] = sign
         P0, md = hv.fan_design_power / 1e3, hv.ms_design
         x0 = np.asarray(x0, float)
-        iu = lambda k: L["U"] + nu * k            # noqa: E731
-        ix = lambda k: L["X"] + nx * (k - 1)      # noqa: E731  (x_k, k = 1..N)
         g = np.zeros(n)
-        Hr, Hc, Hv = [], [], []                   # triplets; duplicates are summed
-        Ar, Ac, Av = [], [], []
-        lba, uba = [], []
-        row = [0]
+        Ar, Ac, Av, lba, uba = [], [], [], [], []
+        row = 0
 
-        def add_row(cols, vals, lo, hi):
-            Ar.extend([row[0]] * len(cols)), Ac.extend(cols), Av.extend(vals)
-            lba.append(lo), uba.append(hi)
-            row[0] += 1
+        def put(rows, cols, vals):
+            Ar.append(np.asarray(rows, dtype=np.int64).ravel())
+            Ac.append(np.asarray(cols, dtype=np.int64).ravel())
+            Av.append(np.asarray(vals, dtype=float).ravel())
 
-        def add_block(blocks, lo, hi, eye):
-            """Rows ``z[eye + i] + Σ M_i z[cols_i]`` in [lo, hi] (every entry of M_i kept)."""
-            m = len(lo)
-            rows = row[0] + np.arange(m)
-            Ar.extend(rows), Ac.extend(eye + np.arange(m)), Av.extend(np.ones(m))
-            for M, cols in blocks:
-                Ar.extend(np.repeat(rows, M.shape[1])), Ac.extend(np.tile(cols, m))
-                Av.extend(np.asarray(M, float).ravel())
-            lba.extend(lo), uba.extend(hi)
-            row[0] += m
+        def bounds(lo, hi, m):
+            lba.append(np.broadcast_to(np.asarray(lo, float), (m,)))
+            uba.append(np.broadcast_to(np.asarray(hi, float), (m,)))
 
-        def add_h(r0, c0, M):
-            r, c = np.meshgrid(np.arange(M.shape[0]) + r0, np.arange(M.shape[1]) + c0,
-                               indexing="ij")
-            Hr.extend(r.ravel()), Hc.extend(c.ravel()), Hv.extend(M.ravel())
-
+        nw = L["nw"]
+        iu = lambda k: L["U"] + nu * k            # noqa: E731
+        iw = lambda k: L["X"] + nw * (k - 1)      # noqa: E731  (w_k: [stage,] x_k, k = 1..N)
+        ix = lambda k: iw(k) + nw - nx            # noqa: E731  (x_k, k = 1..N)
+        fan_c = []
         for k in range(N):
             sysd = self.systems[bool(on[k])]
-            Ak, Gk = sysd["A"], sysd["B_Q"] @ E
             e = (sysd["B_Q"] @ fc.gains[k] + sysd["B_Ts"] @ np.full(nz, T_c[k])
                  + sysd["B_T"] @ fc.T_boundary[k] + sysd["c"])
-            # dynamics: x_{k+1} − A x_k − G u_k = e (x_0 is data)
-            rhs = e + (Ak @ x0 if k == 0 else 0.0)
-            uc = iu(k) + np.arange(nu)
-            blocks = [(-Gk, uc)] + ([(-Ak, ix(k) + np.arange(nx))] if k > 0 else [])
-            add_block(blocks, rhs, rhs, eye=ix(k + 1))
+            e = np.asarray(e).ravel()
+            # dynamics: L x_{k+1} − A x_k − G u_k = e (x_0 is data)
+            r, c, v = sysd["L_t"]
+            put(row + r, iw(k + 1) + c, v)
+            r, c, v = sysd["A_t"]
+            if k == 0:
+                e = e + np.asarray(sysd["A"] @ x0).ravel()
+            else:
+                put(row + r, ix(k) + c, -v)
+            r, c, v = sysd["G_t"]
+            put(row + r, iu(k) + c, -v)
+            bounds(e, e, nw)
+            row += nw
             # reheat: 1 per kW at base flow, kappa per kW of hot air (linear)
             o = iu(k)
-            g[o: o + ns] += dth / hv.eta_heat
-            g[o + ns: o + 2 * ns] += dth * kappa[:, k] / hv.eta_heat
-            # total flow m_k = m0 + f·u_k; fan: 2nd-order Taylor of P0 (m/md)³ at m_pred
-            f = np.concatenate([np.zeros(ns), a_x[:, k], a_c[:, k]])
+            g[o: o + ns] += dth * p_ht[k] / hv.eta_heat
+            g[o + ns: o + 2 * ns] += dth * p_ht[k] * kappa[:, k] / hv.eta_heat
+            # extra flow MF_k = f·u_k; fan: 2nd-order Taylor of P0 (m/md)³ at m_pred
+            f = np.concatenate([a_x[:, k], a_c[:, k]])
+            put(np.full(2 * ns + 1, row), np.r_[L["MF"] + k, o + ns + np.arange(2 * ns)],
+                np.r_[1.0, -f])
+            bounds(0.0, 0.0, 1)
+            row += 1
             m0, mb = base[:, k].sum(), m_pred[k]
             c1, c2 = 3 * P0 * mb ** 2 / md ** 3, 3 * P0 * mb / md ** 3
-            g[o: o + nu] += dth * (c1 + 2 * c2 * (m0 - mb)) * f
-            Mk = dth * 2 * c2 * np.outer(f, f)
-            # moves: λ Σ ||u_k − u_{k−1}||², u_{−1} = the input applied now
-            Mk += 2 * w.move * (2.0 if k < N - 1 else 1.0) * np.eye(nu)
-            add_h(o, o, Mk)
-            if k > 0:
-                add_h(o, iu(k - 1), -2 * w.move * np.eye(nu))
-                add_h(iu(k - 1), o, -2 * w.move * np.eye(nu))
+            g[L["MF"] + k] += dth * p_el[k] * (c1 + 2 * c2 * (m0 - mb))
+            fan_c.append((c1, c2, P0 * (mb / md) ** 3 + c1 * (m0 - mb)))  # fan ≈ c + c1 MF
             # coil split: CC − CH − coil = const [kW]; the base flow sees the zone state at
             # the step's start, the extra flow the LTV temperature
             mix_hat = hv.f_oa * T_o[k] + (1 - hv.f_oa) * T_pred[:, k] - T_c[k]
             kb = base[:, k] * cp * (1 - hv.f_oa) / 1e3
-            cols = [L["CC"] + k, L["CH"] + k, *uc]
-            vals = [1.0, -1.0, *(-f * cp * np.tile(mix_hat, 3) / 1e3)]
+            fu = np.concatenate([np.zeros(ns), f])
+            cols = [L["CC"] + k, L["CH"] + k, *(o + np.arange(nu))]
+            vals = [1.0, -1.0, *(-fu * cp * np.tile(mix_hat, 3) / 1e3)]
             c0 = np.sum(base[:, k] * cp * (hv.f_oa * T_o[k] - T_c[k])) / 1e3
             if k == 0:
                 c0 += kb @ x0[self.sup]
             else:
                 cols += list(ix(k) + self.sup)
                 vals += list(-kb)
-            add_row(cols, vals, c0, c0)
-            g[L["CC"] + k] += dth / hv.cop_cool
-            g[L["CH"] + k] += dth / hv.eta_heat
+            put(np.full(len(cols), row), cols, vals)
+            bounds(c0, c0, 1)
+            row += 1
+            g[L["CC"] + k] += dth * p_el[k] / hv.cop_cool
+            g[L["CH"] + k] += dth * p_ht[k] / hv.eta_heat
+            # electric power (fan linearised + chiller): PK ≥ it; above the cap costs EX
+            c1, _, cf = fan_c[-1]
+            if self.tariff:
+                put([row] * 3, [L["PK"], L["MF"] + k, L["CC"] + k], [1.0, -c1, -1.0 / hv.cop_cool])
+                bounds(cf, np.inf, 1)
+                put([row + 1] * 3, [L["EX"] + k, L["MF"] + k, L["CC"] + k],
+                    [-1.0, c1, 1.0 / hv.cop_cool])
+                bounds(-np.inf, cap[k] - cf, 1)
+                row += 2
             # box capacity: base + extra hot + extra cold flow <= ms_max
-            for j in range(ns):
-                add_row([o + ns + j, o + 2 * ns + j], [a_x[j, k], a_c[j, k]], -np.inf,
-                        ms_max[j] - base[j, k])
+            j = np.arange(ns)
+            put(np.repeat(row + j, 2), np.column_stack([o + ns + j, o + 2 * ns + j]),
+                np.column_stack([a_x[:, k], a_c[:, k]]))
+            bounds(-np.inf, ms_max - base[:, k], ns)
+            row += ns
             # comfort, soft: lo ≤ T + s, T − s ≤ hi at the end of the step (one slack: the
             # band is wider than zero, so at most one side is violated)
-            for j, z in enumerate(self.comfort_idx):
-                sc = L["S"] + k * nc + j
-                add_row([ix(k + 1) + z, sc], [1.0, 1.0], fc.lo[k], np.inf)
-                add_row([ix(k + 1) + z, sc], [1.0, -1.0], -np.inf, fc.hi[k])
-        sl = slice(L["S"], L["CC"])
-        g[sl] += dth * w.comfort_linear
-        Hr.extend(range(L["S"], L["CC"])), Hc.extend(range(L["S"], L["CC"]))
-        Hv.extend([dth * 2 * w.comfort_quadratic] * (nc * N))
+            j = np.arange(nc)
+            sc = L["S"] + k * nc + j
+            xz = ix(k + 1) + self.comfort_idx
+            put(np.repeat(row + j, 2), np.column_stack([xz, sc]), np.tile([1.0, 1.0], nc))
+            bounds(fc.lo[k], np.inf, nc)
+            put(np.repeat(row + nc + j, 2), np.column_stack([xz, sc]), np.tile([1.0, -1.0], nc))
+            bounds(-np.inf, fc.hi[k], nc)
+            row += 2 * nc
+        g[L["S"]:L["CC"]] += dth * w.comfort_linear
+        if self.tariff:
+            if tf is None:
+                raise ValueError("a LinearMPC built with tariff=True needs forecasts with a tariff")
+            g[L["EX"]:L["PK"]] += dth * tf.cap_penalty
+            # a peak without a charge is not unique: an interior point would wander along it
+            g[L["PK"]] += max(tf.demand, 1e-4)
+        # H: comfort (quadratic), fan (on MF), moves λ Σ ||u_k − u_{k−1}||², u_{−1} = now
+        Hr, Hc, Hv = [], [], []
+        sl = np.arange(L["S"], L["CC"])
+        Hr.append(sl), Hc.append(sl), Hv.append(np.full(nc * N, dth * 2 * w.comfort_quadratic))
+        mf = L["MF"] + np.arange(N)
+        Hr.append(mf), Hc.append(mf)
+        Hv.append(np.array([dth * p_el[k] * 2 * fan_c[k][1] for k in range(N)]))
+        diag = np.full(nu * N, 4.0 * w.move)
+        diag[-nu:] = 2.0 * w.move
+        Hr.append(np.arange(nu * N)), Hc.append(np.arange(nu * N)), Hv.append(diag)
+        off = np.arange(nu, nu * N)
+        Hr += [off, off - nu]
+        Hc += [off - nu, off]
+        Hv += [np.full(off.size, -2 * w.move)] * 2
         g[: nu] -= 2 * w.move * u_prev
         lbz = np.full(n, -np.inf)
         ubz = np.full(n, np.inf)
         lbz[:L["X"]] = 0.0
         lbz[L["S"]:] = 0.0
+        lbz[L["MF"]:L["EX"]] = -np.inf
+        if self.tariff:
+            lbz[L["PK"]] = tf.peak_floor
         # reheat at base flow up to Ts_max (0 when the base flow is 0)
         cap_r = (base * cp * (hv.Ts_max - T_c[None, :])) / 1e3
         for k in range(N):
             ubz[iu(k): iu(k) + ns] = cap_r[:, k]
-        H = sparse.coo_matrix((Hv, (Hr, Hc)), shape=(n, n)).tocsc()
-        A = sparse.coo_matrix((Av, (Ar, Ac)), shape=(row[0], n)).tocsc()
+        H = sparse.csc_matrix((np.concatenate(Hv), (np.concatenate(Hr), np.concatenate(Hc))),
+                              shape=(n, n))
+        A = sparse.csc_matrix((np.concatenate(Av), (np.concatenate(Ar), np.concatenate(Ac))),
+                              shape=(row, n))
         H.sum_duplicates(), A.sum_duplicates()
-        return {"H": H, "g": g, "A": A, "lba": np.array(lba), "uba": np.array(uba),
+        return {"H": H, "g": g, "A": A, "lba": np.concatenate(lba), "uba": np.concatenate(uba),
                 "lbz": lbz, "ubz": ubz, "coef": co, "layout": L}
 
     def _make_solver(self, H, A):
@@ -312,6 +389,10 @@ class LinearMPC(RecedingHorizonMPC):
             opts["highs"] = {"output_flag": False, "time_limit": 30.0}
         return ca.conic("linear_mpc", self.solver_name,
                         {"h": _sparsity(H), "a": _sparsity(A)}, opts)
+
+    def _same_pattern(self, qp) -> bool:
+        return all(np.array_equal(p, M.indptr) and np.array_equal(i, M.indices)
+                   for (p, i), M in zip(self._pattern[2], (qp["H"], qp["A"])))
 
     # ---- solve -----------------------------------------------------------------
     def solve(self, x0, fc: Forecast) -> MPCSolution:
@@ -344,11 +425,19 @@ class LinearMPC(RecedingHorizonMPC):
         t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(self.iterations):
             qp = self._qp_data(x0, fc, T_pred, m_pred, u_prev)
-            pattern = (_sparsity(qp["H"]), _sparsity(qp["A"]))
-            if self._qp is None or pattern != self._pattern:
-                self._qp, self._pattern = self._make_solver(qp["H"], qp["A"]), pattern
-            args = {"h": ca.DM(pattern[0], qp["H"].data), "g": qp["g"],
-                    "a": ca.DM(pattern[1], qp["A"].data), "lba": qp["lba"], "uba": qp["uba"],
+            if self._qp is None or not self._same_pattern(qp):
+                # the solver is built once (the pattern never changes): not solve time
+                t_b = time.perf_counter()
+                self._pattern = (_sparsity(qp["H"]), _sparsity(qp["A"]),
+                                 [(M.indptr.copy(), M.indices.copy()) for M in (qp["H"], qp["A"])])
+                self._qp = self._make_solver(qp["H"], qp["A"])
+                self.n_nonzeros = int(qp["H"].nnz + qp["A"].nnz)
+                self.n_rows = int(qp["A"].shape[0])
+                dt_b = time.perf_counter() - t_b
+                self.build_time += dt_b
+                t0 += dt_b
+            args = {"h": ca.DM(self._pattern[0], qp["H"].data), "g": qp["g"],
+                    "a": ca.DM(self._pattern[1], qp["A"].data), "lba": qp["lba"], "uba": qp["uba"],
                     "lbx": qp["lbz"], "ubx": qp["ubz"]}
             if z0 is not None:
                 args["x0"] = z0
@@ -356,7 +445,7 @@ class LinearMPC(RecedingHorizonMPC):
             z = np.asarray(r["x"]).ravel()
             L = qp["layout"]
             Uk = z[: L["X"]].reshape(N, self.NU, ns)       # [step, (q_r, q_x, q_c), box]
-            X = np.vstack([x0, z[L["X"]: L["S"]].reshape(N, L["nx"])])
+            X = np.vstack([x0, z[L["X"]: L["S"]].reshape(N, L["nw"])[:, -L["nx"]:]])
             co = qp["coef"]
             m_pred = (co["base"] + co["a_x"] * Uk[:, 1].T + co["a_c"] * Uk[:, 2].T).sum(axis=0)
             T_pred = _mid(X)[:, self.sup].T

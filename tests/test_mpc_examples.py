@@ -195,7 +195,7 @@ def test_linear_export_exact_at_base_flow(small_model, hvac, comfort_zones):
     ms = ms_min and Ts = T_c + r/(ms_min cp) must give the same trajectory.
     """
     N = 6
-    mpc = LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N)
+    mpc = LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, transcription="zoh")
     net = small_model.network
     rng = np.random.default_rng(1)
     x0 = _x0(small_model, 19.0)
@@ -225,7 +225,9 @@ def test_linear_matches_economic(small_model, hvac, comfort_zones):
     N = 16
     fc, x0 = _forecast(small_model, N), _x0(small_model)
     e = EconomicMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, substeps=3).solve(x0, fc)
-    s = LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, iterations=3).solve(x0, fc)
+    # the exact (ZOH) export: these air-only zones need sub-steps for Radau at 15 min
+    s = LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, iterations=3,
+                  transcription="zoh").solve(x0, fc)
     assert e.success and s.success
     energy = []
     for sol in (e, s):
@@ -389,3 +391,135 @@ def test_minimal_linear_example():
     assert first["u"][m:].min() > 0.1                           # a real plan: the warm-up
     np.testing.assert_allclose(u[:m], first["u"][:m], atol=1e-5)   # box flows ~0.03-0.16 kg/s
     np.testing.assert_allclose(u[m:], first["u"][m:], atol=1e-4)   # reheat 0-3 kW
+
+
+# ---- sparse transcriptions (mpc_examples.sparse) -------------------------------------
+def _op_small(model, hvac):
+    return model.operating_point(ms=dict(zip(model.network.zones, hvac.ms_min)), Ts=13.0,
+                                 T={"outside": 5.0, "ground": 12.0})
+
+
+def test_sparse_and_dense_transcriptions_same_optimum(small_model, hvac, comfort_zones):
+    """The implicit Radau rows (collocation form, sparse) and the same step solved for x⁺
+    (dense blocks) are one problem: the same optimum, cost and plan."""
+    N = 16
+    fc, x0 = _forecast(small_model, N), _x0(small_model)
+    sols = [LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, transcription=t)
+            .solve(x0, fc) for t in ("radau", "radau-dense")]
+    assert all(s.success for s in sols)
+    # PIQP stops at 1e-8 (its default) on both: agreement well inside 1e-6
+    np.testing.assert_allclose(sols[0].cost, sols[1].cost, rtol=1e-6)
+    np.testing.assert_allclose(sols[0].X, sols[1].X, atol=1e-6)
+    np.testing.assert_allclose(sols[0].ms, sols[1].ms, atol=1e-6)
+
+
+@pytest.mark.parametrize("transcription", ["euler", "radau"])
+def test_two_qp_solvers_agree(small_model, hvac, comfort_zones, transcription):
+    """PIQP (interior point) and HiGHS (active set) on the same sparse QP."""
+    N = 12
+    fc, x0 = _forecast(small_model, N), _x0(small_model)
+    sols = [LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, solver=s,
+                      transcription=transcription).solve(x0, fc) for s in ("piqp", "highs")]
+    assert all(s.success for s in sols)
+    np.testing.assert_allclose(sols[0].cost, sols[1].cost, rtol=1e-6)
+    # the first applied input: flows [kg/s] to 1e-6, supply temperatures [°C] where it flows
+    np.testing.assert_allclose(sols[0].ms[0], sols[1].ms[0], atol=1e-6)
+    # and the state it leads to (later steps can trade flow for reheat at equal cost: the
+    # optimum is not unique there, 5 mK apart was seen)
+    np.testing.assert_allclose(sols[0].X[1], sols[1].X[1], atol=1e-5)
+
+
+def test_implicit_steps_converge_to_zoh_at_their_order(small_model, hvac):
+    """On the linear model at a fixed flow, the implicit steps approach the exact (ZOH) step
+    at their order: halving h divides Radau's error by about 2³ and Euler's by 2."""
+    from mpc_examples.sparse import at_flow, step_rows
+
+    dyn = at_flow(small_model, hvac.ms_min)
+    net = small_model.network
+    rng = np.random.default_rng(0)
+    x0 = 20.0 + rng.normal(0.0, 1.0, net.n_states)
+    u = (np.full(net.n_zones, 30.0), np.array([5.0, 12.0]), np.full(net.n_zones, 200.0))
+
+    def error(method, h, T=3600.0):
+        ex, ap = step_rows(dyn, h, "zoh"), step_rows(dyn, h, method)
+        xe, xa = x0.copy(), x0.copy()
+        for _ in range(int(round(T / h))):
+            b = lambda s: s.B_Ts @ u[0] + s.B_T @ u[1] + s.B_Q @ u[2]  # noqa: E731
+            xe = ex.N @ xe + b(ex)
+            rhs = ap.N @ xa + b(ap)
+            xa = np.linalg.solve(ap.L.toarray(), rhs)[-net.n_states:]
+        return np.abs(xa - xe).max()
+
+    e_r = [error("radau", h) for h in (120.0, 60.0)]
+    e_e = [error("euler", h) for h in (120.0, 60.0)]
+    assert e_r[0] < 0.05 * e_e[0]                 # third order beats first by far
+    assert 5.0 < e_r[0] / e_r[1] < 11.0           # ~2³ (the fast edges are not asymptotic yet)
+    assert 1.7 < e_e[0] / e_e[1] < 2.3            # ~2
+    # at the MPC's 10-min step (far from asymptotic for the fast states) still the better
+    assert error("radau", 600.0) < 0.5 * error("euler", 600.0)
+
+
+def test_eliminating_convection_edges_keeps_sparsity(small_model, hvac):
+    """Singular perturbation of the r1–r3 air path: two states fewer, no fill-in, zone and
+    wall states unchanged, exact at steady state, small step error."""
+    from mpc_examples.sparse import eliminate_fast_edges
+
+    op = _op_small(small_model, hvac)
+    rnet, info = eliminate_fast_edges(small_model, op)
+    net = small_model.network
+    assert rnet.n_states == net.n_states - 2 and info["eliminated"] == 2
+    assert rnet.state_names == [n for n in net.state_names if not n.startswith("x[r1-r3")] \
+        or rnet.n_states == len(rnet.state_names)
+    assert info["nnz"][1] <= info["nnz"][0]
+    # the Schur complement couples r1 and r3 directly, nothing else
+    K = np.asarray(rnet.K)
+    full_K_pattern = np.count_nonzero(K)
+    assert full_K_pattern == info["nnz"][1]
+    x_r = rnet.steady_state(op.u)
+    np.testing.assert_allclose(x_r[: net.n_zones], op.x[: net.n_zones], atol=1e-9)
+    assert max(info["step error"].values()) < 0.01
+
+
+def test_economic_on_reduced_network(small_model, hvac, comfort_zones):
+    """The economic NMPC on the model without convection states (sparse symbolic rows from
+    the ReducedNetwork): solves, and plans within 1 % of the full model's energy."""
+    from mpc_examples.sparse import eliminate_fast_edges
+
+    N = 16
+    fc, x0 = _forecast(small_model, N), _x0(small_model)
+    rnet, _ = eliminate_fast_edges(small_model, _op_small(small_model, hvac), error=False)
+    full = EconomicMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, substeps=3)
+    red = EconomicMPC(rnet, hvac, comfort_zones, dt=DT, horizon=N, substeps=3)
+    a, b = full.solve(x0, fc), red.solve(rnet.from_full_state(x0), fc)
+    assert a.success and b.success
+    np.testing.assert_allclose(b.cost, a.cost, rtol=0.01)
+    assert red.n_nonzeros < full.n_nonzeros
+
+
+def test_tariff_event_cap_and_peak(small_model, hvac, comfort_zones):
+    """With a tariff: the planned electric power respects a feasible event cap (the MPC
+    pre-cools instead), and the peak variable is the plan's largest electric power."""
+    from mpc_examples.common import Tariff
+
+    N = 16
+    fc = _forecast(small_model, N, T_out=30.0, gains=600.0, start_hour=8.0)
+    x0 = _x0(small_model, 22.5)
+    el = np.full(N, 0.1)
+    cap = np.where((np.arange(N) >= 8) & (np.arange(N) < 12), 0.0, np.inf)
+    plans = {}
+    for name, c in (("free", np.full(N, np.inf)), ("event", cap)):
+        fc.tariff = Tariff(elec=el, heat=np.full(N, 0.04), demand=1.0, elec_cap=c,
+                           cap_penalty=50.0)
+        mpc = LinearMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, tariff=True,
+                        transcription="zoh")
+        sol = mpc.solve(x0, fc)
+        assert sol.success
+        p = hvac.powers(sol.ms, sol.Ts, sol.X[:-1, :4], fc.T_out, fc.T_c)
+        plans[name] = (p["fan"] + p["cooling"] / hvac.cop_cool) / 1e3, sol
+    free, event = plans["free"][0], plans["event"][0]
+    on = cap == 0.0
+    # the cap 0 is infeasible (fan and coil at the ventilation minimum): the event plan sheds
+    # the extra cooling flow, what it can (measured 0.45 against 0.56 kW at most)
+    assert event[on].max() < 0.9 * free[on].max()
+    # and cools earlier (pre-cooling): more electric power before the event than without it
+    assert event[:8].sum() > free[:8].sum()
