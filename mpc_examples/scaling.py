@@ -1,25 +1,38 @@
-"""Solve time against building size: the same MPCs on the testbed corridor floor.
+"""Solve time against building size: the MPCs on Pugh Hall (7 zones) and the corridor floor.
 
 Run from the repository root::
 
-    python -m mpc_examples.scaling                   # 7 (Pugh Hall) and 50 zones
-    python -m mpc_examples.scaling --zones 7 20 50 --hours 3
+    python -m mpc_examples.scaling                          # 7, 50 and 200 zones
+    python -m mpc_examples.scaling --zones 7 50 --mpc linear --hours 1
 
-For each size, a short receding-horizon run starting at 06:00 on a weekday (warm-up and
-occupancy: the hardest part of the day for the solver) with the *true* model inside the MPC
-(structure identification of a 50-zone floor needs 52+ days of data; the solve time does
-not depend on where the parameters came from), full and reduced to a few states per zone
-(:func:`mpc_examples.model.reduced_model`); models above ``--max-states`` are listed but
-not run (the 49-zone floor: see docs/mpc.md). Prints and saves a table: states, decision
-variables, build time, solve time median / max (wall) and median CPU time, iterations.
+For each size, a short receding-horizon run from 06:00 on a Monday (warm-up and occupancy:
+the hardest part of the day for the solver) with the testbed's *true* model inside the MPC
+(the solve time does not depend on where the parameters came from) and the plant's true
+state fed back (no estimator: a Kalman filter on 2 348 states would dominate the loop and
+measure nothing about the MPC). Every size is run; nothing is skipped above a state count.
+For each model and form the table gives the states, decision variables, stored nonzeros of
+the QP (H and A) or of the NLP's constraint Jacobian and Lagrangian Hessian, build time,
+solve time median / max (wall) and median CPU time, and failures.
+
+Models: ``full`` (the network as it is), ``no-conv`` (convection-edge states eliminated
+by singular perturbation, :func:`mpc_examples.sparse.eliminate_fast_edges`: as sparse as
+the full model) and ``structured k/zone`` (:func:`thermctl.reduce.structured`, dense edge
+modes); the reductions' step-response errors are printed with the table. Forms: for the
+linear MPC ``zoh`` (dense exported ``A_k``), ``euler`` and ``radau`` (sparse implicit
+rows), each with the QP solvers asked for; for the economic NMPC the implicit Radau gaps
+(sparse) and IPOPT with MUMPS. A dense form whose QP would hold more than
+``--max-dense-nnz`` nonzeros is listed with that count and not built (the 200-zone ZOH
+QP: 36 · 2 348² ≈ 2·10⁸ nonzeros, 1.6 GB of values alone).
+
 Wall times include whatever else runs on the machine; CPU time is the process's own
-(single-threaded, so set ``OMP_NUM_THREADS=1``).
+(single-threaded: set ``OMP_NUM_THREADS=1``).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import time
 from pathlib import Path
 
@@ -29,92 +42,186 @@ import pandas as pd
 from .common import format_table
 from .economic_mpc import EconomicMPC
 from .linear_mpc import LinearMPC
-from .model import controller_model, reduced_model
-from .simulator import make_controller, make_scenario, run_mpc
+from .simulator import make_scenario
+from .sparse import eliminate_fast_edges
 
-__all__ = ["main"]
+__all__ = ["main", "state_feedback_run"]
 
 log = logging.getLogger(__name__)
 
-CONTROLLERS = {"economic": EconomicMPC, "linear": LinearMPC}
+
+def state_feedback_run(scn, mpc, to_model_state, n_solves: int):
+    """``n_solves`` receding-horizon steps on a fresh plant with its true state fed back.
+
+    Returns
+    -------
+    wall, cpu : ndarray, shape (n_solves,)
+        Solve times [s].
+    failures : int
+    """
+    plant = scn.plant()
+    every = int(round(mpc.dt / scn.dt))
+    sup = scn.hvac.supplied
+    nz = len(scn.tb.network.zones)
+    wall, cpu, fails = [], [], 0
+    for j in range(n_solves):
+        meas = plant.measure()
+        fc = scn.forecast(j * every, mpc.N, every, np.zeros(nz), meas.T_ahu)
+        sol = mpc.solve(to_model_state(plant.x), fc)
+        wall.append(sol.solve_time)
+        cpu.append(sol.cpu_time)
+        fails += not sol.success
+        ms = np.zeros(nz)
+        ms[sup] = sol.ms[0][sup]
+        Ts = np.full(nz, meas.T_ahu)
+        Ts[sup] = np.maximum(sol.Ts[0][sup], meas.T_ahu)
+        for _ in range(every):
+            plant.step(ms, Ts)
+    return np.asarray(wall), np.asarray(cpu), fails
 
 
-def _skipped(kind, scn, nx):
-    return {"MPC": kind, "zones": len(scn.tb.network.zones), "states": nx,
-            "variables": np.nan, "build [s]": np.nan, "solve median [s]": np.nan,
-            "solve max [s]": np.nan, "CPU median [s]": np.nan, "iterations median": np.nan,
-            "solves": 0, "failures": 0}
+def _models(scn, per_zone, log_errors):
+    """``[(name, model, to_model_state, info)]`` for the full and reduced models."""
+    tb = scn.tb
+    full = tb.model
+    boxes = tb.truth.details["vav_boxes"]
+    net = full.network
+    ms = {z: boxes[z]["ms_min"] for z in net.zones if z in boxes}
+    Tb = tb.data[[f"T:{b}" for b in net.boundary]].mean().to_numpy()
+    op = full.operating_point(ms=ms, Ts=float(tb.controller.settings.T_ahu),
+                              T=dict(zip(net.boundary, Tb)))
+    out = [("full", full, lambda x: x, {})]
+    rnet, info = eliminate_fast_edges(full, op)
+    out.append(("no-conv", rnet, rnet.from_full_state, info))
+    for k in per_zone:
+        from thermctl.reduce import Reference, linearize, structured
+        t0 = time.perf_counter()
+        red = structured(full, op, order=k * net.n_zones, design_ms=[0.0])
+        info = {"states": (net.n_states, red.network.n_states), "time [s]": time.perf_counter() - t0}
+        if net.n_states <= 800:
+            err = Reference(linearize(full, op)).step_error(red.sys)
+            info["step error"] = dict(zip((f"{t / 3600:g} h" for t in err.times),
+                                          (float(v) for v in err.rel)))
+        out.append((f"structured {k}/zone", red.network, red.network.from_full_state, info))
+    for name, _, _, info in out[1:]:
+        log_errors.append((len(net.zones), name, info))
+    return out
 
 
-def _measure(kind, scn, model, args):
+def _row(kind, form, solver, zones, name, model, **kw):
+    r = {"MPC": kind, "zones": zones, "model": name, "states": model.network.n_states,
+         "form": form, "solver": solver, "variables": np.nan, "nonzeros": np.nan,
+         "build [s]": np.nan, "solve median [s]": np.nan, "solve max [s]": np.nan,
+         "CPU median [s]": np.nan, "solves": 0, "failures": 0, "note": ""}
+    r.update(kw)
+    return r
+
+
+def _measure(kind, form, solver, scn, name, model, to_x, args):
     N = int(round(args.horizon * 60.0 / args.step))
+    zones = len(scn.tb.network.zones)
     nx = model.network.n_states
-    if nx > args.max_states:
-        # measured on the 49-zone floor (docs/mpc.md): economic, 661 states: the first cold
-        # IPOPT solve unfinished after 48 min (KKT fill-in); 147 reduced (dense) states: the
-        # NLP's construction unfinished after 25 min. Linear: dense A_k, N·nx² nonzeros
-        # (12 s per QP at 147 states).
-        log.warning("%s MPC on %d states skipped (--max-states %d)", kind, nx, args.max_states)
-        return _skipped(kind, scn, nx)
+    if kind == "linear" and form == "zoh" and N * nx * nx > args.max_dense_nnz:
+        nnz = N * nx * nx
+        return _row(kind, form, solver, zones, name, model, nonzeros=float(nnz),
+                    note=f"not built: dense A_k, {nnz / 1e6:.0f} M nonzeros")
     t0 = time.perf_counter()
-    mpc = make_controller(CONTROLLERS[kind], model, scn, args.step, N)
+    if kind == "linear":
+        mpc = LinearMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
+                        solver=solver, transcription=form)
+    else:
+        mpc = EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
+                          transcription=form)
     build = time.perf_counter() - t0
-    its = []
-    solve = mpc.solve
-
-    def counted(x0, fc):
-        sol = solve(x0, fc)
-        its.append(sol.iterations)
-        return sol
-
-    mpc.solve = counted
-    res = run_mpc(scn, mpc, model, kind)
-    st, ct = np.asarray(res.solve_time), np.asarray(res.cpu_time)
-    return {"MPC": kind, "zones": len(scn.tb.network.zones), "states": model.network.n_states,
-            "variables": getattr(mpc, "n_variables", np.nan), "build [s]": build,
-            "solve median [s]": float(np.median(st)), "solve max [s]": float(st.max()),
-            "CPU median [s]": float(np.median(ct)), "iterations median": float(np.median(its)),
-            "solves": len(st), "failures": res.failures}
+    n_solves = args.solves if nx <= 1000 else args.solves_large
+    wall, cpu, fails = state_feedback_run(scn, mpc, to_x, n_solves)
+    if kind == "linear":
+        build = mpc.build_time   # the constructor and the first QP's solver
+        nnz = mpc.n_nonzeros
+    else:
+        nnz = mpc.n_nonzeros
+    return _row(kind, form, solver, zones, name, model, variables=float(mpc.n_variables),
+                nonzeros=np.nan if nnz is None else float(nnz), **{"build [s]": build,
+                                       "solve median [s]": float(np.median(wall)),
+                                       "solve max [s]": float(wall.max()),
+                                       "CPU median [s]": float(np.median(cpu)),
+                                       "solves": len(wall), "failures": fails})
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--zones", type=int, nargs="+", default=[7, 50])
-    p.add_argument("--mpc", nargs="+", choices=["economic", "linear"], default=["economic", "linear"])
-    p.add_argument("--hours", type=float, default=2.0, help="closed-loop length per size [h]")
+    p.add_argument("--zones", type=int, nargs="+", default=[7, 50, 200])
+    p.add_argument("--mpc", nargs="+", choices=["economic", "linear"], default=["linear", "economic"])
+    p.add_argument("--forms", nargs="+", default=["zoh", "euler", "radau"],
+                   help="linear MPC transcriptions (mpc_examples.sparse.TRANSCRIPTIONS)")
+    p.add_argument("--solvers", nargs="+", default=["piqp", "osqp"],
+                   help="casadi.conic plugins for the linear MPC's sparse forms")
+    p.add_argument("--models", nargs="+", default=["full", "no-conv", "structured 3/zone"],
+                   help="which of the models below to run")
+    p.add_argument("--economic-max-zones", type=int, default=50,
+                   help="run the economic NMPC up to this size (its target is 50 zones)")
+    p.add_argument("--solves", type=int, default=6, help="MPC steps per run")
+    p.add_argument("--solves-large", type=int, default=2,
+                   help="MPC steps per run for models above 1000 states (the 200-zone floor)")
+    p.add_argument("--osqp-max-states", type=int, default=100,
+                   help="run OSQP only up to this many states (51 s CPU for one QP of the "
+                        "50-zone floor, measured: ADMM needs thousands of iterations here)")
     p.add_argument("--start-hour", type=float, default=6.0)
     p.add_argument("--step", type=float, default=10.0, help="MPC step [min]")
     p.add_argument("--horizon", type=float, default=6.0, help="prediction horizon [h]")
-    p.add_argument("--per-zone", type=int, nargs="+", default=[0, 3],
-                   help="states per zone of the MPC's model: 0 = the full model, k = structure-"
-                        "preserving reduction to k·n_zones states")
-    p.add_argument("--max-states", type=int, default=100,
-                   help="skip models with more states: the full 49-zone floor has 661, reduced "
-                        "147, and neither MPC comes near 1 s there (docs/mpc.md); e.g. "
-                        "--mpc linear --max-states 150 measures the reduced one (12 s a QP)")
+    p.add_argument("--per-zone", type=int, nargs="*", default=[3],
+                   help="states per zone of the structured reductions")
+    p.add_argument("--max-dense-nnz", type=float, default=2e7,
+                   help="list, do not build, a dense (zoh) QP with more nonzeros")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=Path("mpc-output"))
+    p.add_argument("--save", type=Path, default=None,
+                   help="also write the table here (e.g. benchmarks/results/mpc_scaling.txt)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    rows = []
+    rows, errors = [], []
     for z in args.zones:
-        scn = make_scenario(z, args.seed, args.hours, args.horizon, start_day=3,
+        hours = (max(args.solves, args.solves_large) + 1) * args.step / 60.0
+        scn = make_scenario(z, args.seed, hours, args.horizon, start_day=3,
                             start_hour=args.start_hour)  # day 3 from 2011-01-21: a Monday
-        full = controller_model(scn.tb, "true")
-        for per_zone in args.per_zone:
-            model = (reduced_model(scn.tb, full, per_zone * full.network.n_zones) if per_zone
-                     else full)
-            for kind in args.mpc:
-                rows.append(_measure(kind, scn, model, args))
+        for name, model, to_x, _ in _models(scn, args.per_zone, errors):
+            if name not in args.models:
+                continue
+            jobs = []
+            if "linear" in args.mpc:
+                for form in args.forms:
+                    for solver in (args.solvers if form != "zoh" else args.solvers[:1]):
+                        if solver == "osqp" and model.network.n_states > args.osqp_max_states:
+                            continue
+                        jobs.append(("linear", form, solver))
+            if "economic" in args.mpc and z <= args.economic_max_zones:
+                jobs.append(("economic", "implicit", "ipopt"))
+            for kind, form, solver in jobs:
+                try:
+                    rows.append(_measure(kind, form, solver, scn, name, model, to_x, args))
+                except MemoryError as exc:   # report, do not hide
+                    rows.append(_row(kind, form, solver, z, name, model, note=f"failed: {exc!r}"))
                 r = rows[-1]
-                print(f"  {kind}, {r['zones']} zones, {r['states']} states: median "
-                      f"{r['solve median [s]']:.3f} s", flush=True)
+                print(f"  {kind} {form} {solver}, {r['zones']} zones, {name} ({r['states']} "
+                      f"states): median {r['solve median [s]']:.3f} s {r['note']}", flush=True)
     df = pd.DataFrame(rows).set_index("MPC")
-    print(format_table(df))
+    text = format_table(df)
+    err_lines = ["", "reductions (step-response error, relative, of the linearization at the "
+                 "boxes' minimum flows):"]
+    for z, name, info in errors:
+        se = info.get("step error")
+        se = ", ".join(f"{k} {v:.2%}" for k, v in se.items()) if se else "not measured (> 800 states)"
+        err_lines.append(f"  {z} zones, {name}: {info['states'][0]} -> {info['states'][1]} "
+                         f"states in {info['time [s]']:.1f} s; {se}")
+    text = text + "\n" + "\n".join(err_lines)
+    print(text)
     args.out.mkdir(parents=True, exist_ok=True)
     df.to_csv(args.out / "scaling.csv")
-    (args.out / "scaling.txt").write_text(format_table(df) + "\n")
+    (args.out / "scaling.txt").write_text(text + "\n")
+    if args.save:
+        args.save.parent.mkdir(parents=True, exist_ok=True)
+        args.save.write_text(text + "\n")
     return df
 
 
