@@ -4,7 +4,8 @@ For every building (``thermctl.testbed.generate("corridor", zones=Z)``, 5-min da
 7 zones also Pugh Hall's 7-zone section as a second row) and every worker count this
 script runs what ``thermctl identify --scale local --workers N --intervals none`` runs::
 
-    identify(meas, IdentifyOptions(scale="local", workers=N, intervals="none"))
+    identify(meas, IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                                   split=SplitOptions(scale="local", workers=N)))
 
 on the calibration days (thermctl's default split: the last quarter of the whole days is
 held back) and prints one markdown row per (building, workers) as soon as it is done.
@@ -75,11 +76,12 @@ from pathlib import Path
 import numpy as np
 
 from thermctl.data import read_measurements
-from thermctl.identify import IdentifyOptions, identify
+from thermctl.identify import EstimationOptions, IdentifyOptions, SplitOptions, identify
 from thermctl.testbed import generate
 
 RESULTS = Path(__file__).resolve().parent / "results"
 GLOBAL_MAX_ZONES = 13          # --global-too: buildings with at most this many zones
+LOCAL_CANDIDATES = SplitOptions().candidates   # --local-candidates (the default of identify)
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -205,7 +207,9 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
     """``identify`` of one building at one scale / worker count, measured and scored."""
     spec = meas.spec
     row = Row(label, zones, len(spec.measured_zones), scale, workers if scale == "local" else None)
-    opt = IdentifyOptions(scale=scale, workers=workers, intervals="none")
+    opt = IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                          split=SplitOptions(scale=scale, workers=workers,
+                                             candidates=LOCAL_CANDIDATES))
     last = {"t": 0.0}
     t_start = time.perf_counter()
 
@@ -380,8 +384,11 @@ def main(argv=None) -> Result:
     ap.add_argument("--global-too", action="store_true",
                     help=f"also scale='global' for buildings of at most {GLOBAL_MAX_ZONES} zones")
     ap.add_argument("--no-pugh", action="store_true", help="no pugh-hall row with 7 zones")
+    ap.add_argument("--local-candidates", choices=("all", "sin"), default=LOCAL_CANDIDATES,
+                    help="what each local search starts from (as identify --local-candidates)")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
     args = ap.parse_args(argv)
+    globals()["LOCAL_CANDIDATES"] = args.local_candidates
     if args.quick:
         args.zones, args.days, args.workers = [9], 4.0, [1, 2]
     # the library's log lines (one per local problem) would interleave with the table

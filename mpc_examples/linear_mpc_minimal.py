@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from thermctl.data import read_measurements
-from thermctl.identify import IdentifyOptions, identify
+from thermctl.identify import EstimationOptions, IdentifyOptions, identify
 from thermctl.testbed import generate
 
 DT_MIN, HORIZON_H = 15, 6.0         # MPC step [min], prediction horizon [h]
@@ -55,7 +55,8 @@ def run(fast=False, hours=72.0, start_hour=0.0, seed=0, solver="piqp", verbose=T
         model = tb.model
     else:
         meas = read_measurements(tb.data[tb.data.index < t0], tb.spec, name="testbed logs")
-        model = identify(meas, IdentifyOptions(intervals="none")).model
+        opt = IdentifyOptions(estimation=EstimationOptions(intervals="none"))
+        model = identify(meas, opt).model
 
     # 3. StateSpace. With the supply off the model is linear in state, boundary temperatures
     # and heat with no constant term, so A and those columns of B hold for absolute values;

@@ -20,7 +20,8 @@ from thermctl.brick import (CONSTRUCTIONS, apply_column_map, example_model,  # n
 from thermctl.cli import app  # noqa: E402
 from thermctl.data import read_measurements  # noqa: E402
 from thermctl.errors import DataError, DataWarning, SpecError  # noqa: E402
-from thermctl.identify import IdentifyOptions, identify  # noqa: E402
+from thermctl.identify import (EstimationOptions, IdentifyOptions, SplitOptions,  # noqa: E402
+                               StructureOptions, identify)
 from thermctl.io import model_to_dict  # noqa: E402
 from thermctl.model import ThermalModel  # noqa: E402
 from thermctl.network import ThermalNetwork  # noqa: E402
@@ -116,8 +117,8 @@ def test_brick_round_trip_identifies_the_same_model(tmp_path, pugh):
                               *_FAST])
     assert res.exit_code == 0, res.output
     brick = json.loads((tmp_path / "o" / "model.json").read_text())
-    opts = IdentifyOptions(criterion="simulation", selection="scores", structure_method="glasso",
-                           grid=False)
+    opts = IdentifyOptions(structure=StructureOptions(method="glasso"),
+                           estimation=EstimationOptions(criterion="simulation", grid=False))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         hand = model_to_dict(identify(read_measurements(tmp_path / "tb" / "data.csv", tb.spec),
@@ -273,7 +274,8 @@ def test_brick_round_trip_greybox_default(tmp_path, pugh):
     """The default identification (grey-box likelihood, BIC selection) on 4 testbed days:
     the Brick spec and the hand-written spec give the same air paths and R̄_v per path."""
     tb = generate("pugh-hall", days=4, seed=0)
-    opts = IdentifyOptions(intervals="none", scale="global")
+    opts = IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                           split=SplitOptions(scale="global"))
     models = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

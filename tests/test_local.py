@@ -146,14 +146,17 @@ def test_fit_local_failure_is_reported_not_raised(corridor):
 
 def test_short_calibration_is_never_called_identified(tmp_path):
     """Two days of data (1 calibration day): the interval verdicts say 'not identified'."""
-    from thermctl.identify import IdentifyOptions, identify
+    from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
+                                   SplitOptions, identify)
     from thermctl.spec import load_spec
     generate("pugh-hall", days=2, seed=4).write(tmp_path)
     spec = load_spec(tmp_path / "building.yaml")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         meas = read_measurements(tmp_path / "data.csv", spec)
-        ident = identify(meas, IdentifyOptions(candidates="all", intervals="wald", scale="global"))
+        ident = identify(meas, IdentifyOptions(selection=SelectionOptions(candidates="all"),
+                                               estimation=EstimationOptions(intervals="wald"),
+                                               split=SplitOptions(scale="global")))
     if ident.intervals is None:
         pytest.skip("no air path kept on these 2 days: nothing to call identified")
     assert all("not identified" in v for v in ident.intervals.verdicts.values())
@@ -164,7 +167,8 @@ def test_short_calibration_is_never_called_identified(tmp_path):
 
 def test_identify_many_matches_one_by_one(tmp_path):
     """A portfolio run gives each building what identify gives it alone."""
-    from thermctl.identify import IdentifyOptions, identify, identify_many
+    from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
+                                   SplitOptions, identify, identify_many)
     from thermctl.spec import load_spec
     generate("corridor", zones=5, days=3, seed=5).write(tmp_path)
     spec = load_spec(tmp_path / "building.yaml")
@@ -172,7 +176,9 @@ def test_identify_many_matches_one_by_one(tmp_path):
         warnings.simplefilter("ignore")
         meas = read_measurements(tmp_path / "data.csv", spec)
     two = meas.window(end=meas.start + 2 * (meas.end - meas.start) / 3)
-    opt = IdentifyOptions(scale="local", workers=1, margin=1e6, intervals="none")
+    opt = IdentifyOptions(selection=SelectionOptions(margin=1e6),
+                          estimation=EstimationOptions(intervals="none"),
+                          split=SplitOptions(scale="local", workers=1))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         many = identify_many([meas, two], opt)
@@ -213,12 +219,15 @@ def test_local_finds_what_the_whole_building_method_finds(pugh):
     likelihood keeps, with per-edge R̄_v within a factor 2 of its estimate; they also keep
     false paths it does not (measured: 3, and those share the exchange of r241-r247, whose
     local R̄_v is 2.1e-4 against 3.7e-4; docs/identification.md says why)."""
-    from thermctl.identify import IdentifyOptions, identify
+    from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
+                                   SplitOptions, identify)
     spec, meas = pugh
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        glob = identify(meas, IdentifyOptions(scale="global", intervals="none"))
-        loc = identify(meas, IdentifyOptions(scale="local", intervals="none", workers=2))
+        glob = identify(meas, IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                                              split=SplitOptions(scale="global")))
+        loc = identify(meas, IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                                             split=SplitOptions(scale="local", workers=2)))
     g = {e.name for e in glob.model.network.convection_edges}
     kept = {v.name for v in loc.local.verdicts if v.kept}
     assert len(g) >= 2 and g <= kept
@@ -260,3 +269,37 @@ def test_latent_depth_bounds_the_closure_with_a_conductance_weighted_proxy():
     assert got[0] == pytest.approx((25 * 22 + 12.5 * 18 + 2.5 * 0) / 40.0)
     assert got[1] == pytest.approx((25 * 22 + 2.5 * 0) / 27.5)     # C's gap renormalised
     ThermalNetwork(p.spec, p.candidates)
+
+
+def test_propose_sin_unites_both_ends_and_falls_back_on_few_days(corridor):
+    """Local SIN proposals: a pair picked from either end is proposed to both problems;
+    a neighbourhood with fewer than |neighbourhood| + 2 days searches every candidate."""
+    from thermctl.local import propose_sin
+    spec, meas, _ = corridor
+    short = meas.frame.loc[meas.frame.index < meas.frame.index[0] + np.timedelta64(3, "D")]
+    probs = local_problems(spec, short.columns)     # 3 days: too few for any neighbourhood
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        few, _ = propose_sin(probs, short)
+    assert all(p.proposed is None for p in few)
+
+    tb = generate("corridor", zones=9, days=12, seed=2)
+    frame = read_measurements(tb.data, tb.spec, name="tb").frame
+    probs = local_problems(tb.spec, frame.columns)
+    prop, scores = propose_sin(probs, frame)
+    by_zone = {p.zone: p for p in prop}
+    named = {p.zone: {f"air:{min(a, b)}-{max(a, b)}" for a, b, _ in p.proposed} for p in prop}
+    for p in prop:
+        assert p.proposed is not None and set(p.proposed) <= set(p.candidates)
+        for a, b, _ in p.proposed:                    # the other end proposes it too
+            other = b if a == p.zone else a
+            if other in by_zone:
+                assert f"air:{min(a, b)}-{max(a, b)}" in named[other]
+    # every true air path between measured offices is proposed (SIN's recall on 12 days)
+    meas_z = set(tb.spec.measured_zones)
+    true = {f"air:{min(e.a, e.b)}-{max(e.a, e.b)}" for e in tb.model.network.convection_edges
+            if e.a in meas_z and e.b in meas_z}
+    assert true and true <= set().union(*named.values())
+    # and far fewer pairs than the candidates: the searches start small
+    assert sum(len(p.proposed) for p in prop) < 0.6 * sum(len(p.candidates) for p in prop)
+    assert all(0.0 <= v <= 1.0 for sc in scores.values() for v in sc.values())

@@ -521,3 +521,44 @@ def test_every_parameter_documented():
                 assert f"\n{name} :" in doc or f"\n{name}, " in doc or f", {name} :" in doc, \
                     f"{obj.__qualname__}: parameter {name!r} not documented"
     assert set(mod.__all__) >= {"StructureIdentifier", "sin_pvalues", "ScoredEdge"}
+
+
+# ---------------------------------------------------------------------------- local SIN
+def _chain_frame(n_days, seed=0):
+    """Hourly zone temperatures: z follows n1 (a door), n2 is independent of z given n1."""
+    import pandas as pd
+    rng = np.random.default_rng(seed)
+    K = 24
+    n1 = rng.normal(size=(n_days, K))
+    n2 = 0.7 * n1 + rng.normal(size=(n_days, K))       # correlated with z only through n1
+    z = 0.8 * n1 + 0.6 * rng.normal(size=(n_days, K))
+    idx = pd.date_range("2024-01-01", periods=n_days * K, freq="1h")
+    return pd.DataFrame({"T:z": 20 + z.ravel(), "T:n1": 20 + n1.ravel(),
+                         "T:n2": 20 + n2.ravel()}, index=idx)
+
+
+def test_neighbourhood_scores_find_the_direct_neighbour_only():
+    from thermctl.structure.neighbourhood import neighbourhood_scores
+    sc = neighbourhood_scores(_chain_frame(40), "z", ["n1", "n2"])
+    assert set(sc) == {"n1", "n2"}
+    # partial correlation of z and n1 given n2 is 0.8/sqrt(0.8²+0.6²)·… ≫ 0: every hour
+    assert sc["n1"] == 1.0
+    # z ⟂ n2 | n1: SIN (Šidák over 3 pairs, level 0.05) joins them at ≤ ~5 % of the hours
+    assert sc["n2"] <= 3 / 24
+    # plain correlation of z and n2 is 0.8·0.7/…≈0.45: without conditioning it would score 1
+    f = _chain_frame(40)
+    assert np.corrcoef(f["T:z"], f["T:n2"])[0, 1] > 0.3
+
+
+def test_neighbourhood_scores_need_neighbourhood_plus_two_days():
+    from thermctl.structure.neighbourhood import neighbourhood_scores
+    with pytest.raises(DataError, match="needs >= 5 complete days"):
+        neighbourhood_scores(_chain_frame(4), "z", ["n1", "n2"])
+    assert set(neighbourhood_scores(_chain_frame(5), "z", ["n1", "n2"])) == {"n1", "n2"}
+
+
+def test_neighbourhood_scores_trim_to_the_days_available():
+    from thermctl.structure.neighbourhood import neighbourhood_scores
+    # 4 days: a neighbourhood of 2 zones (z + n1); n2 gets no score instead of an error
+    sc = neighbourhood_scores(_chain_frame(4), "z", ["n1", "n2"], trim=True)
+    assert set(sc) == {"n1"}

@@ -20,36 +20,68 @@ from .model import ConvectionParameters, ThermalModel
 from .network import ThermalNetwork, air_path_name
 from .structure import StructureIdentifier
 
-__all__ = ["IdentifyOptions", "Identification", "identify", "identify_many"]
+__all__ = ["IdentifyOptions", "StructureOptions", "SelectionOptions", "EstimationOptions",
+           "SplitOptions", "Identification", "identify", "identify_many"]
 
 logger = logging.getLogger(__name__)
 
 
 CRITERIA = ("likelihood", "kstep", "simulation")
-SELECTIONS = ("model", "scores")
+SELECTIONS = ("auto", "model", "scores")
+
+
+def _one_of(stage, name, value, allowed):
+    if value not in allowed:
+        raise DataError(f"identify option {stage}.{name} must be one of {list(allowed)}, "
+                        f"found {value!r}")
 
 
 @dataclass
-class IdentifyOptions:
-    """Settings of :func:`identify` (the CLI's options).
-
-    The default is thermctl's grey-box identification: SIN proposes candidate air paths
-    (walls allowed: an open door beside a wall is an air path), backward elimination by
-    BIC on the Kalman-filter likelihood keeps the ones the data need, and R̄_v comes from
-    the likelihood with unmeasured gains as random-walk states, with intervals. The
-    paper's pipeline is ``criterion="simulation", selection="scores"``. Why the default
-    differs from the paper: ``docs/identification.md`` (measured on a family of testbed
-    buildings, ``benchmarks/identification.py``).
+class StructureOptions:
+    """The paper's structure stage: concentration graphs of zone temperatures and their scores.
 
     Attributes
     ----------
-    criterion : {"likelihood", "kstep", "simulation"}
-        Parameter estimation criterion: Kalman likelihood (default), k-step-ahead
-        prediction error from filtered states, or the paper's open-loop simulation error.
-    selection : {"model", "scores"}
+    method : {"sin", "glasso"}
+        Concentration-graph method (paper: SIN).
+    level : float
+        SIN significance level (paper: 0.05).
+    rule : {"paper", "threshold"}
+        Edge rule of ``selection.method="scores"`` (paper: each zone's argmax partner).
+    s_min : float
+        Score threshold of the ``threshold`` rule (also the threshold part of the SIN
+        candidates of the model-based selection) [-].
+    allow_parallel : bool
+        ``selection.method="scores"``: keep zone pairs joined by a wall as candidates.
+        The model-based selection always offers them (an open door beside a wall).
+    """
+
+    method: str = "sin"
+    level: float = 0.05
+    rule: str = "paper"
+    s_min: float = 0.25
+    allow_parallel: bool = False
+
+    def check(self):
+        _one_of("structure", "method", self.method, ("sin", "glasso"))
+        _one_of("structure", "rule", self.rule, ("paper", "threshold"))
+        if not 0.0 < self.level < 1.0:
+            raise DataError(f"identify option structure.level must be in (0, 1), found {self.level}")
+        if not 0.0 <= self.s_min <= 1.0:
+            raise DataError(f"identify option structure.s_min must be in [0, 1], found {self.s_min}")
+
+
+@dataclass
+class SelectionOptions:
+    """Which air paths enter the model.
+
+    Attributes
+    ----------
+    method : {"auto", "model", "scores"}
         ``model``: candidates pruned by an information criterion on the likelihood
-        (:func:`thermctl.selection.select_air_paths`); ``scores``: the paper's rule on the SIN
-        scores alone (forced with ``criterion="simulation"``).
+        (:func:`thermctl.selection.select_air_paths`); ``scores``: the paper's rule on the
+        SIN scores alone; ``auto`` (default): ``scores`` with the simulation criterion,
+        else ``model``.
     candidates : {"sin", "sin+pairs", "all"}
         Candidates of the model-based selection: the union of SIN's argmax and threshold
         picks (walls allowed), pruned backward; ``sin+pairs``: those picks as the start,
@@ -57,24 +89,35 @@ class IdentifyOptions:
         misses, e.g. beside an open door; slower); ``all``: every pair with a known or
         estimable air path length, forward then backward. With too few days for SIN,
         ``all`` is used (noted).
-    selection_criterion : {"bic", "aic", "holdout"}
+    criterion : {"bic", "aic", "holdout"}
     margin : float
         Criterion improvement an edge must bring to stay in the model [-].
+    """
+
+    method: str = "auto"
+    candidates: str = "sin"
+    criterion: str = "bic"
+    margin: float = 10.0
+
+    def check(self):
+        _one_of("selection", "method", self.method, SELECTIONS)
+        _one_of("selection", "candidates", self.candidates, ("sin", "sin+pairs", "all"))
+        _one_of("selection", "criterion", self.criterion, ("bic", "aic", "holdout"))
+
+
+@dataclass
+class EstimationOptions:
+    """How R̄_v and C_v are estimated.
+
+    Attributes
+    ----------
+    criterion : {"likelihood", "kstep", "simulation"}
+        Kalman likelihood (default), k-step-ahead prediction error from filtered states,
+        or the paper's open-loop simulation error.
     solar : bool
-        Per-zone solar apertures on the data's ``solar:`` columns (grey-box criteria).
+        Per-zone solar apertures on the data's ``solar:`` columns (Kalman criteria).
     intervals : {"profile", "wald", "none"}
         Uncertainty of R̄_v and τ0 (likelihood criterion).
-    structure_method : {"sin", "glasso"}
-        Concentration-graph method (paper: SIN).
-    level : float
-        SIN significance level (paper: 0.05).
-    rule : {"paper", "threshold"}
-        Edge selection rule of ``selection="scores"`` (paper: each zone's argmax partner).
-    s_min : float
-        Score threshold of the ``threshold`` rule.
-    allow_parallel : bool
-        ``selection="scores"``: keep zone pairs joined by a wall as candidates (the
-        model-based selection always does).
     estimator : {"nlp", "single_shooting", "grid", "none"}
         ``criterion="simulation"``: ``nlp``: CasADi multiple-shooting NLP (IPOPT);
         ``single_shooting``: the same cost through the exact ZOH simulator; ``grid``: the
@@ -87,96 +130,160 @@ class IdentifyOptions:
     grid : bool
         ``criterion="simulation"``: also run the grid (the reference, and the J-vs-R̄_v
         figure).
-    calibration, validation : tuple of str or None
-        Date windows ``(start, end)``; default: :meth:`Measurements.split`.
-    scale : {"auto", "global", "local"}
-        ``selection="model"``: ``global`` fits the whole building's likelihood for every
-        candidate (cost ~n³ per evaluation, n = every state); ``local`` splits it into one
-        problem per measured zone (:mod:`thermctl.local`), run in parallel; ``auto``:
-        local above ``local_above`` measured zones.
-    local_above : int
-        Measured zones above which ``scale="auto"`` goes local.
-    combine : {"both", "sum", "either"}
-        ``scale="local"``: how the verdicts of an air path's two ends combine
-        (:func:`thermctl.local.combine`).
-    workers : int or None
-        ``scale="local"``: local processes (default every core).
-    scheduler : str or None
-        ``scale="local"``: a Dask scheduler address (``tcp://host:8786``) to send the local
-        problems to instead of local processes.
-    local_rows : {"all", "auto", "supply_off"}
-        ``scale="local"``: samples whose innovations count in the local likelihoods (as
-        :class:`thermctl.estimate.likelihood.LikelihoodOptions` ``fit_rows``; see
-        :func:`thermctl.local.fit_local` for why ``all``).
-    refit_max_states : int
-        ``scale="local"``: refit the selected structure on the whole building (one shared
-        R̄_v, intervals) when its model has at most this many states; above, the model
-        keeps the local per-edge R̄_v.
-    latent_depth : int or None
-        ``scale="local"``: unmeasured zones a local problem holds, counted in hops through
-        unmeasured zones; beyond, a steady-state proxy (:func:`thermctl.local.local_problems`).
     """
 
     criterion: str = "likelihood"
-    selection: str = "model"
-    candidates: str = "sin"
-    selection_criterion: str = "bic"
-    margin: float = 10.0
     solar: bool = True
     intervals: str = "profile"
-    structure_method: str = "sin"
-    level: float = 0.05
-    rule: str = "paper"
-    s_min: float = 0.25
-    allow_parallel: bool = False
     estimator: str = "nlp"
     window_hours: float = 12.0
     initial_state: str = "paper"
     grid: bool = True
-    calibration: tuple | None = None
-    validation: tuple | None = None
+
+    def check(self):
+        _one_of("estimation", "criterion", self.criterion, CRITERIA)
+        _one_of("estimation", "intervals", self.intervals, ("profile", "wald", "none"))
+        _one_of("estimation", "estimator", self.estimator,
+                ("nlp", "single_shooting", "grid", "none"))
+        _one_of("estimation", "initial_state", self.initial_state,
+                ("paper", "burn_in", "estimate"))
+        if not self.window_hours > 0:
+            raise DataError(f"identify option estimation.window_hours must be > 0 [h], found "
+                            f"{self.window_hours}")
+
+
+@dataclass
+class SplitOptions:
+    """Building scale: one problem per measured zone (:mod:`thermctl.local`), or none.
+
+    Attributes
+    ----------
+    scale : {"auto", "global", "local"}
+        ``global`` fits the whole building's likelihood for every candidate (cost ~n³ per
+        evaluation, n = every state); ``local`` splits it into one problem per measured
+        zone, run in parallel; ``auto``: local above ``local_above`` measured zones.
+    local_above : int
+        Measured zones above which ``scale="auto"`` goes local.
+    candidates : {"all", "sin"}
+        What each local search starts from: every pair with a length (forward then
+        backward), or the paper's SIN on the zone's neighbourhood (needs neighbourhood size
+        + 2 days; :func:`thermctl.local.propose_sin`) pruned backward.
+    combine : {"both", "sum", "either"}
+        How the verdicts of an air path's two ends combine (:func:`thermctl.local.combine`).
+    workers : int or None
+        Local processes (default every core).
+    scheduler : str or None
+        A Dask scheduler address (``tcp://host:8786``) to send the local problems to
+        instead of local processes.
+    rows : {"all", "auto", "supply_off"}
+        Samples whose innovations count in the local likelihoods (as
+        :class:`thermctl.estimate.likelihood.LikelihoodOptions` ``fit_rows``; see
+        :func:`thermctl.local.fit_local` for why ``all``).
+    refit_max_states : int
+        Refit the selected structure on the whole building (one R̄_v per air path,
+        intervals) when its model has at most this many states; above, the model keeps
+        the local per-edge R̄_v.
+    latent_depth : int or None
+        Unmeasured zones a local problem holds, counted in hops through unmeasured zones;
+        beyond, a steady-state proxy (:func:`thermctl.local.local_problems`).
+    """
+
     scale: str = "auto"
     local_above: int = 12
+    candidates: str = "all"
     combine: str = "both"
     workers: int | None = None
     scheduler: str | None = None
-    local_rows: str = "all"
+    rows: str = "all"
     refit_max_states: int = 150
     latent_depth: int | None = 1
 
     def check(self):
-        for name, allowed in (("criterion", CRITERIA), ("selection", SELECTIONS),
-                              ("candidates", ("sin", "sin+pairs", "all")),
-                              ("selection_criterion", ("bic", "aic", "holdout")),
-                              ("intervals", ("profile", "wald", "none")),
-                              ("estimator", ("nlp", "single_shooting", "grid", "none")),
-                              ("scale", ("auto", "global", "local")),
-                              ("combine", ("sum", "both", "either")),
-                              ("local_rows", ("auto", "all", "supply_off"))):
-            if getattr(self, name) not in allowed:
-                raise DataError(f"identify option {name} must be one of {list(allowed)}, "
-                                f"found {getattr(self, name)!r}")
-
-        if self.scale == "local" and (self.paper or self.selection == "scores"):
-            raise DataError("identify: scale='local' needs selection='model' with a grey-box "
-                            "criterion; the paper's pipeline (--criterion simulation or "
-                            "--selection scores) has no local form yet")
-        if self.latent_depth is not None and self.latent_depth < 1:
-            raise DataError(f"identify option latent_depth must be >= 1 or None, found "
-                            f"{self.latent_depth}")
+        _one_of("split", "scale", self.scale, ("auto", "global", "local"))
+        _one_of("split", "candidates", self.candidates, ("all", "sin"))
+        _one_of("split", "combine", self.combine, ("sum", "both", "either"))
+        _one_of("split", "rows", self.rows, ("auto", "all", "supply_off"))
         if self.workers is not None and self.workers < 1:
-            raise DataError(f"identify option workers must be >= 1, found {self.workers}")
+            raise DataError(f"identify option split.workers must be >= 1, found {self.workers}")
+        if self.latent_depth is not None and self.latent_depth < 1:
+            raise DataError(f"identify option split.latent_depth must be >= 1 or None, found "
+                            f"{self.latent_depth}")
+
+
+@dataclass
+class IdentifyOptions:
+    """Settings of :func:`identify` (the CLI's options), nested by stage.
+
+    The default is thermctl's grey-box identification: SIN proposes candidate air paths
+    (walls allowed: an open door beside a wall is an air path), backward elimination by
+    BIC on the Kalman-filter likelihood keeps the ones the data need, and R̄_v comes from
+    the likelihood with unmeasured gains as random-walk states, with intervals. The
+    paper's pipeline is ``estimation.criterion="simulation"`` (its selection is then the
+    paper's rule on the SIN scores). Why the default differs from the paper:
+    ``docs/identification.md`` (measured on a family of testbed buildings,
+    ``benchmarks/identification.py``).
+
+    Attributes
+    ----------
+    structure : StructureOptions
+        SIN / graphical lasso and the paper's edge rules.
+    selection : SelectionOptions
+        Which air paths enter the model.
+    estimation : EstimationOptions
+        R̄_v and C_v: criterion, intervals, the paper's NLP settings.
+    split : SplitOptions
+        Building scale: local problems, workers, Dask.
+    calibration, validation : tuple of str or None
+        Date windows ``(start, end)``; default: :meth:`Measurements.split`.
+
+    Examples
+    --------
+    >>> opt = IdentifyOptions(estimation=EstimationOptions(criterion="simulation"))
+    >>> opt.check().selection_method
+    'scores'
+    >>> IdentifyOptions(split=SplitOptions(scale="local", workers=2)).check().split.workers
+    2
+    """
+
+    structure: StructureOptions = field(default_factory=StructureOptions)
+    selection: SelectionOptions = field(default_factory=SelectionOptions)
+    estimation: EstimationOptions = field(default_factory=EstimationOptions)
+    split: SplitOptions = field(default_factory=SplitOptions)
+    calibration: tuple | None = None
+    validation: tuple | None = None
+
+    def check(self) -> "IdentifyOptions":
+        """Raise :class:`DataError` (one line) on a bad or contradictory option; return self."""
+        for stage in (self.structure, self.selection, self.estimation, self.split):
+            stage.check()
+        if self.paper and self.selection.method == "model":
+            raise DataError("identify: estimation.criterion='simulation' (the paper's "
+                            "pipeline) selects air paths by the paper's rule on SIN scores; "
+                            "selection.method='model' needs a Kalman criterion")
+        local = self.split.scale == "local"
+        if local and self.selection_method == "scores":
+            raise DataError("identify: split.scale='local' needs the model-based selection "
+                            "with a Kalman criterion; the paper's pipeline (simulation "
+                            "criterion or selection.method='scores') has no local form yet")
+        return self
+
+    @property
+    def selection_method(self) -> str:
+        """``model`` or ``scores``, with ``auto`` resolved."""
+        if self.selection.method != "auto":
+            return self.selection.method
+        return "scores" if self.paper else "model"
 
     def is_local(self, spec) -> bool:
         """Whether this building is identified by local problems."""
-        if self.paper or self.selection == "scores" or self.scale == "global":
+        if self.selection_method == "scores" or self.split.scale == "global":
             return False
-        return self.scale == "local" or len(spec.measured_zones) > self.local_above
+        return self.split.scale == "local" or len(spec.measured_zones) > self.split.local_above
 
     @property
     def paper(self) -> bool:
         """The paper's pipeline (simulation criterion, SIN-score selection)."""
-        return self.criterion == "simulation"
+        return self.estimation.criterion == "simulation"
 
 
 @dataclass
@@ -240,16 +347,16 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     opt = options or IdentifyOptions()
     opt.check()
     cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
-    if opt.paper or opt.selection == "scores":
+    if opt.paper or opt.selection_method == "scores":
         ident = _identify_paper(meas, cal, val, opt, progress)
     elif opt.is_local(meas.spec):
         return _identify_local(meas, cal, val, opt, progress, client)
     else:
         ident = _identify_greybox(meas, cal, val, opt, progress)
-    if client is not None or opt.scheduler or opt.workers:
+    if client is not None or opt.split.scheduler or opt.split.workers:
         ident.notes.append(f"--workers/--scheduler apply to local problems only; this building "
                            f"({len(meas.spec.measured_zones)} measured zones, --scale "
-                           f"{opt.scale}) was identified as a whole in this process")
+                           f"{opt.split.scale}) was identified as a whole in this process")
     return ident
 
 
@@ -273,8 +380,8 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     notes = []
     if progress:
         progress("structure", 0, 1)
-    sid = StructureIdentifier(method=opt.structure_method, level=opt.level, rule=opt.rule,
-                              s_min=opt.s_min, allow_parallel=opt.allow_parallel)
+    sid = StructureIdentifier(method=opt.structure.method, level=opt.structure.level, rule=opt.structure.rule,
+                              s_min=opt.structure.s_min, allow_parallel=opt.structure.allow_parallel)
     sid.fit(cal.frame, net0)
     if progress:
         progress("structure", 1, 1)
@@ -288,7 +395,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     elif not opt.paper:
         gb, ida = _greybox_fit(net, cal, opt, notes)
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
-    elif opt.estimator != "none":
+    elif opt.estimation.estimator != "none":
         est, grid = _estimate(net, cal, opt, progress)
         if est is not None:
             rbar_v, c_v = est.rbar_v, est.c_v
@@ -312,12 +419,12 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
     notes = []
     sid = None
     cands = start = None
-    if opt.candidates in ("sin", "sin+pairs"):
+    if opt.selection.candidates in ("sin", "sin+pairs"):
         if progress:
             progress("structure", 0, 1)
         try:
-            sid = StructureIdentifier(method=opt.structure_method, level=opt.level,
-                                      rule="paper", s_min=opt.s_min, allow_parallel=True)
+            sid = StructureIdentifier(method=opt.structure.method, level=opt.structure.level,
+                                      rule="paper", s_min=opt.structure.s_min, allow_parallel=True)
             sid.fit(cal.frame, net0)
         except DataError as exc:
             sid = None
@@ -329,9 +436,9 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
             dist = {p: spec.air_path_length(*p)[0] for p in sid.candidates_}
             picks = {tuple(sorted((e.a, e.b))) for e in sid.edges_}
             picks |= {tuple(sorted((e.a, e.b))) for e in rule_edges(
-                {p: sid.scores_[p] for p in dist}, dist, sid.zones_, "threshold", opt.s_min)}
+                {p: sid.scores_[p] for p in dist}, dist, sid.zones_, "threshold", opt.structure.s_min)}
             cands = sorted(picks)
-            if opt.candidates == "sin+pairs":
+            if opt.selection.candidates == "sin+pairs":
                 # SIN's picks are the start; every measured pair may still enter, and the
                 # backward pass may still drop a pick (SIN misses pairs whose partial
                 # correlation another path hides, e.g. beside an open door)
@@ -362,11 +469,11 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
         direction = "backward" if sid is not None and start is None else "both"
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
-            sel = select_air_paths(spec, cal, candidates=cands, criterion=opt.selection_criterion,
-                               direction=direction, margin=opt.margin, progress=say,
+            sel = select_air_paths(spec, cal, candidates=cands, criterion=opt.selection.criterion,
+                               direction=direction, margin=opt.selection.margin, progress=say,
                                on_fit=on_fit,
                                start=start or (),
-                               final_criterion=opt.criterion, solar=opt.solar)
+                               final_criterion=opt.estimation.criterion, solar=opt.estimation.solar)
         net = ThermalNetwork(spec, sel.edges)
         if not sel.edges:
             notes.append("the data support no convection edge: the model is conduction-only")
@@ -395,10 +502,11 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     (small buildings) or the local per-edge R̄_v (large ones)."""
     from .local import identify_local
 
-    li = identify_local(meas.spec, cal.frame, rule=opt.combine, criterion=opt.selection_criterion,
-                        margin=opt.margin, solar=opt.solar, workers=opt.workers,
-                        client=client or opt.scheduler, progress=progress,
-                        fit_rows=opt.local_rows, latent_depth=opt.latent_depth)
+    li = identify_local(meas.spec, cal.frame, rule=opt.split.combine, criterion=opt.selection.criterion,
+                        margin=opt.selection.margin, solar=opt.estimation.solar, workers=opt.split.workers,
+                        client=client or opt.split.scheduler, progress=progress,
+                        fit_rows=opt.split.rows, latent_depth=opt.split.latent_depth,
+                        candidates=opt.split.candidates, level=opt.structure.level, s_min=opt.structure.s_min)
     return _finish_local(meas, cal, val, opt, li, progress)
 
 
@@ -416,7 +524,7 @@ def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
     if not li.edges:
         notes.append("the local problems support no convection edge: the model is "
                      "conduction-only")
-    elif net.n_states <= opt.refit_max_states:
+    elif net.n_states <= opt.split.refit_max_states:
         if progress:
             progress("whole-building refit", 0, 1)
         # one R̄_v per air path, started at the local values: with a shared R̄_v a false
@@ -432,7 +540,7 @@ def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
             progress("whole-building refit", 1, 1)
     else:
         notes.append(f"the whole-building model has {net.n_states} states (> "
-                     f"{opt.refit_max_states}): R̄_v per air path from the local problems, "
+                     f"{opt.split.refit_max_states}): R̄_v per air path from the local problems, "
                      "no whole-building refit and no intervals")
     meta = _meta(meas, cal, val, opt, {})
     meta["local"] = {
@@ -481,11 +589,11 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
     """
     import time as _time
 
-    from .local import assemble, local_problems, run_local
+    from .local import assemble, local_problems, propose_sin, run_local
 
     opt = options or IdentifyOptions()
     opt.check()
-    client = client or opt.scheduler
+    client = client or opt.split.scheduler
     own = False
     if isinstance(client, str):
         from distributed import Client
@@ -501,21 +609,23 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         for k in local:
             cal = splits[k][0]
             ps = local_problems(items[k].spec, cal.frame.columns,
-                                latent_depth=opt.latent_depth)
+                                latent_depth=opt.split.latent_depth)
+            if opt.split.candidates == "sin":
+                ps, _ = propose_sin(ps, cal.frame, opt.structure.level, opt.structure.s_min)
             problems += ps
             frames += [cal.frame] * len(ps)
             owner += [k] * len(ps)
         t0 = _time.perf_counter()
-        results = run_local(problems, frames, workers=opt.workers, client=client,
-                            progress=progress, criterion=opt.selection_criterion,
-                            margin=opt.margin, solar=opt.solar,
-                            fit_rows=opt.local_rows) if problems else []
+        results = run_local(problems, frames, workers=opt.split.workers, client=client,
+                            progress=progress, criterion=opt.selection.criterion,
+                            margin=opt.selection.margin, solar=opt.estimation.solar,
+                            fit_rows=opt.split.rows) if problems else []
         wall = _time.perf_counter() - t0
         out = {}
         for k in local:
             idx = [i for i, o in enumerate(owner) if o == k]
-            li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.combine,
-                          opt.margin, wall)
+            li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.split.combine,
+                          opt.selection.margin, wall)
             cal, val = splits[k]
             out[k] = _finish_local(items[k], cal, val, opt, li, progress)
         for k in whole:
@@ -532,17 +642,17 @@ def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
     from .estimate.likelihood import LikelihoodEstimator
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
-        gb = LikelihoodEstimator(net, criterion=opt.criterion, solar=opt.solar,
+        gb = LikelihoodEstimator(net, criterion=opt.estimation.criterion, solar=opt.estimation.solar,
                               per_edge=per_edge).fit(cal, init=init)
     return gb, _intervals(gb, opt, notes, cal)
 
 
 def _intervals(gb, opt, notes, cal=None):
-    if opt.intervals == "none" or gb.criterion != "likelihood":
+    if opt.estimation.intervals == "none" or gb.criterion != "likelihood":
         return None
     from .estimate.likelihood import identifiability
     names = [n for n in gb.problem_.layout.names if n.startswith("rbar_v")] + ["tau0"]
-    method = opt.intervals
+    method = opt.estimation.intervals
     if method == "profile" and len(names) > 5:
         # a profile costs ~10 fits per parameter: past a few per-edge R̄_v, Wald
         method = "wald"
@@ -576,9 +686,9 @@ def _misfit_note(ida, opt, notes):
     notes.append(
         f"the model's one-step innovations are far from white (sandwich/Hessian variance ratio "
         f"{iv.inflation:.0f} for R̄_v): the likelihood overstates the evidence, so "
-        f"{opt.selection_criterion.upper()} differences of edges are inflated about that much and "
+        f"{opt.selection.criterion.upper()} differences of edges are inflated about that much and "
         "edges kept with a margin of "
-        f"{opt.margin:g} may be spurious. Check the structure with --selection-criterion holdout "
+        f"{opt.selection.margin:g} may be spurious. Check the structure with --selection-criterion holdout "
         "(held-back days) or a larger --margin, and the spec (zone heat capacities, missing "
         "internal mass) — measured on the twin house in benchmarks/results/twinhouse.txt.")
 
@@ -603,14 +713,14 @@ def _estimate(net, cal, opt, progress):
     from .estimate.simulation import CostProblem, fit, grid_search
 
     data = EstimationData.from_frame(cal.frame, net)
-    problem = CostProblem(net, data, window=opt.window_hours * 3600.0,
-                          initial_state=opt.initial_state)
+    problem = CostProblem(net, data, window=opt.estimation.window_hours * 3600.0,
+                          initial_state=opt.estimation.initial_state)
     grid = None
-    if opt.grid or opt.estimator == "grid":
+    if opt.estimation.grid or opt.estimation.estimator == "grid":
         grid = grid_search(problem, progress=progress)
     est = None
-    if opt.estimator in ("nlp", "single_shooting"):
-        method = "multiple_shooting" if opt.estimator == "nlp" else "single_shooting"
+    if opt.estimation.estimator in ("nlp", "single_shooting"):
+        method = "multiple_shooting" if opt.estimation.estimator == "nlp" else "single_shooting"
         theta0 = None if grid is None else (grid.best_rbar_v, grid.best_c_v)
         est = fit(problem, method=method, theta0=theta0, progress=progress)
     return est, grid

@@ -51,7 +51,7 @@ from .network import ThermalNetwork, air_path_name
 from .spec import BuildingSpec, Distance, Zone
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
-           "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES"]
+           "propose_sin", "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES"]
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +74,11 @@ class LocalProblem:
         Candidate air paths ``(a, b, d)`` with one end ``zone``, ``d`` [m].
     columns : tuple of str
         Data columns the problem reads.
+    aggregates : tuple of (str, tuple of (str, float))
+        Boundary nodes whose temperature is a weighted mean of measured nodes.
+    proposed : tuple of (str, str, float) or None
+        Candidates a structure rule proposed (:func:`propose_sin`): the search starts from
+        them and prunes backward. ``None``: forward from none, then backward.
     """
 
     zone: str
@@ -81,6 +86,7 @@ class LocalProblem:
     candidates: tuple
     columns: tuple
     aggregates: tuple = ()
+    proposed: tuple | None = None
 
     def data(self, frame):
         """The problem's data: its columns of ``frame``, plus the aggregate boundary
@@ -349,8 +355,10 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
               **options) -> LocalResult:
     """Select and fit the air paths of one local problem.
 
-    Forward selection from no air path, then backward elimination (BIC on the local
-    Kalman likelihood, ``margin``), then one R̄_v per kept edge.
+    Without proposals (``problem.proposed is None``): forward selection from no air path,
+    then backward elimination (BIC on the local Kalman likelihood, ``margin``). With
+    proposals (:func:`propose_sin`): backward elimination from them. Then one R̄_v per
+    kept edge.
 
     Parameters
     ----------
@@ -385,13 +393,21 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     if not problem.candidates:
         return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states,
                            time=time.perf_counter() - t0, cpu=time.process_time() - c0)
+    cands, direction = list(problem.candidates), "both"
+    if problem.proposed is not None:
+        cands, direction = list(problem.proposed), "backward"
+        if not cands:
+            return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states,
+                               time=time.perf_counter() - t0, cpu=time.process_time() - c0,
+                               reasons={air_path_name(a, b): "out: not proposed"
+                                        for a, b, _ in problem.candidates})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         warnings.simplefilter("ignore", ConvergenceWarning)
-        sel = select_air_paths(problem.spec, sub, candidates=list(problem.candidates),
-                           criterion=criterion, direction="both", margin=margin,
-                           final_per_edge=True, max_iter=max_iter, solar=solar,
-                           fit_rows=fit_rows, **options)
+        sel = select_air_paths(problem.spec, sub, candidates=cands,
+                               criterion=criterion, direction=direction, margin=margin,
+                               final_per_edge=True, max_iter=max_iter, solar=solar,
+                               fit_rows=fit_rows, **options)
     evidence = {}
     for st in sel.path:
         if st.action in ("add", "stop"):
@@ -411,6 +427,83 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     return LocalResult(problem.zone, kept, evidence, rb, tau0, n_states, int(est.n_obs_),
                        sel.n_fits, time.perf_counter() - t0, time.process_time() - c0,
                        dict(sel.reasons))
+
+
+def propose_sin(problems, frame, level: float = 0.05, s_min: float = 0.25) -> tuple:
+    """The paper's structure rule on every zone's neighbourhood: proposals for the searches.
+
+    Each problem's zone and its measured candidate partners form a neighbourhood whose SIN
+    concentration graph (:func:`thermctl.structure.neighbourhood.neighbourhood_scores`,
+    ``N >= |neighbourhood| + 2`` days instead of the building's ``n + 2``) scores the
+    zone's pairs; the zone's best partner and every pair scoring at least ``s_min`` are
+    picked (the paper's rule ∪ the threshold rule, as the whole-building default). An air
+    path picked from either end is proposed to both ends' problems — the whole-building
+    rule also picks a pair when it is the best of either zone. Cheap (correlations only):
+    runs before the tasks are sent.
+
+    Parameters
+    ----------
+    problems : list of LocalProblem
+    frame : pandas.DataFrame
+        Calibration data.
+    level, s_min : float
+        SIN level and score threshold [-].
+
+    Returns
+    -------
+    problems : list of LocalProblem
+        With ``proposed`` set (left ``None`` where SIN could not run: too few days for
+        that neighbourhood).
+    scores : dict
+        Air-path name → {zone: local SIN score}.
+    """
+    from dataclasses import replace
+    picks, scores, failed = set(), {}, set()
+    for p in problems:
+        got = _sin_picks(p, frame, level, s_min)
+        if got is None:
+            failed.add(p.zone)
+            continue
+        sc, chosen = got
+        picks |= chosen
+        for nm, v in sc.items():
+            scores.setdefault(nm, {})[p.zone] = v
+    if failed:
+        log.warning("local SIN could not run for %d zone(s) (too few complete days for their "
+                    "neighbourhoods): their searches start from every candidate: %s",
+                    len(failed), sorted(failed)[:10])
+    out = [p if p.zone in failed else
+           replace(p, proposed=tuple(c for c in p.candidates if air_path_name(*c[:2]) in picks))
+           for p in problems]
+    return out, scores
+
+
+def _sin_picks(problem, frame, level, s_min):
+    """``(scores by air-path name, names picked)`` by SIN on the problem's neighbourhood,
+    or ``None`` when SIN cannot run (too few days)."""
+    from .structure.neighbourhood import neighbourhood_scores
+    from .structure.selection import select_edges as rule_edges
+    z = problem.zone
+    other = {(b if a == z else a): (a, b, d) for a, b, d in problem.candidates}
+    if not other:
+        return {}, set()
+    # nearest partners first: with few days the neighbourhood keeps the closest ones
+    order = sorted(other, key=lambda n: (other[n][2], n))
+    try:
+        scores = neighbourhood_scores(frame, z, order, level=level, trim=True)
+    except DataError as exc:
+        log.info("local SIN of %s: %s", z, exc)
+        return None
+    pairs = {tuple(sorted(other[n][:2])): sc for n, sc in scores.items()}
+    dist = {tuple(sorted(other[n][:2])): other[n][2] for n in scores}
+    # the paper's rule for this zone (its best partner, if it scores at all) ∪ threshold;
+    # rule_edges' "paper" would also give every neighbour its best pair, here always z's
+    picked = {(e.a, e.b) for e in rule_edges(pairs, dist, [z], "threshold", s_min)}
+    best = min(pairs, key=lambda p: (-pairs[p], dist[p], p), default=None)
+    if best is not None and pairs[best] > 0:
+        picked.add(best)
+    return ({air_path_name(*p): v for p, v in pairs.items()},
+            {air_path_name(*p) for p in picked})
 
 
 def _fit_task(problem, frame, kwargs):
@@ -662,7 +755,9 @@ class LocalIdentification:
 def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: str = "bic",
                    margin: float = 10.0, solar: bool = True, workers: int | None = None,
                    client=None, progress=None, parallel: bool = True,
-                   fit_rows: str = "all", latent_depth: int | None = 1) -> LocalIdentification:
+                   fit_rows: str = "all", latent_depth: int | None = 1,
+                   candidates: str = "all", level: float = 0.05,
+                   s_min: float = 0.25) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -688,6 +783,10 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         Samples of the local likelihoods (:func:`fit_local`).
     latent_depth : int or None
         Unmeasured zones deep a problem reaches (:func:`local_problems`).
+    candidates : {"all", "sin"}
+        What each local search starts from (:func:`fit_local`).
+    level, s_min : float
+        ``candidates="sin"``: SIN level and score threshold [-].
 
     Returns
     -------
@@ -701,6 +800,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     """
     t0 = time.perf_counter()
     problems = local_problems(spec, frame.columns, parallel=parallel, latent_depth=latent_depth)
+    if candidates == "sin":
+        problems, _ = propose_sin(problems, frame, level, s_min)
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
                         criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows)
     return assemble(problems, results, rule, margin, time.perf_counter() - t0)

@@ -293,7 +293,7 @@ def write_outputs(ident: Identification, outdir) -> dict:
         save_model(ident.model, tmp / "model.json")
         sid = ident.structure
         if sid is not None:
-            how = ("SIN candidates, kept by " + ident.options.selection_criterion.upper()
+            how = ("SIN candidates, kept by " + ident.options.selection.criterion.upper()
                    if ident.selection is not None else f"{sid.method}, rule={sid.rule}")
             save_figure(plot_network(sid, network=ident.model.network,
                                      title=f"{ident.model.network.spec.name}: identified network ({how})"),
@@ -338,7 +338,7 @@ def identification_document(ident: Identification) -> dict:
         "format": "thermctl-identification", "version": 2,
         "run_id": model.meta.get("run_id"), "created": model.meta.get("created"),
         "method": ("paper (SIN rule + simulation criterion)" if opt.paper else
-                   f"grey-box ({opt.criterion}; structure: "
+                   f"grey-box ({opt.estimation.criterion}; structure: "
                    + ("model-based selection" if sel is not None else "SIN rule") + ")"),
         "model": model_to_dict(model)["parameters"],
         "alpha": model.network.spec.alpha(),
@@ -354,7 +354,7 @@ def identification_document(ident: Identification) -> dict:
             "edges": edges,
             "top_scores": [{"a": a, "b": b, "score": s} for (a, b), s in top],
             "selection": None if sel is None else {
-                "criterion": sel.criterion, "margin": opt.margin,
+                "criterion": sel.criterion, "margin": opt.selection.margin,
                 "candidates": [c.name for c in sel.candidates],
                 "path": [{"action": st.action, "edge": st.edge, "value": st.value,
                           "delta": st.delta, "edges": st.edges, "note": st.note}
@@ -383,7 +383,7 @@ def identification_document(ident: Identification) -> dict:
     ]
     if sel is not None:
         blocks.append({"section": "Structure", "kind": "table",
-                       "title": f"Model-based selection ({sel.criterion.upper()}, margin {opt.margin:g})",
+                       "title": f"Model-based selection ({sel.criterion.upper()}, margin {opt.selection.margin:g})",
                        "content": [{"step": st.action, "edge": st.edge or "",
                                     sel.criterion.upper(): st.value, "change": st.delta,
                                     "note": st.note} for st in sel.path]})

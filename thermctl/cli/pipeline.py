@@ -13,14 +13,15 @@ from rich.table import Table
 
 from ..data import read_measurements
 from ..errors import DataError, ModelError, ThermctlError
-from ..identify import IdentifyOptions
+from ..identify import (EstimationOptions, IdentifyOptions, SelectionOptions, SplitOptions,
+                        StructureOptions)
 from ..io import load_model
 from ..spec import load_spec
 from . import app
 from ._common import console, handle_errors, progress, read_options
 
-# CLI defaults are read from the dataclass: one place for each default
-_IDENT_DEFAULTS = IdentifyOptions()
+# CLI defaults are read from the dataclasses: one place for each default
+_D = IdentifyOptions()
 
 UNITS_HELP = "Units of the data file: si (°C, kg/s) or imperial (°F, CFM)."
 
@@ -76,45 +77,66 @@ def identify(
     building: Path = typer.Option(..., "--building", "-b", help="Building spec (YAML or JSON)."),
     out: Path = typer.Option(Path("thermctl-out"), "--out", "-o", help="Output directory."),
     units: str = typer.Option("si", help=UNITS_HELP),
-    criterion: str = typer.Option("likelihood", help="Parameter criterion: likelihood (Kalman filter, "
-                                  "unmeasured gains as states; default), kstep (k-step-ahead error "
-                                  "from filtered states) or simulation (the paper's open-loop error)."),
-    selection: str = typer.Option("model", help="Air paths: model (SIN candidates kept by BIC on the "
-                                  "likelihood; default) or scores (the paper's rule on SIN scores; "
-                                  "forced by --criterion simulation)."),
-    candidates: str = typer.Option("sin", help="--selection model: sin (SIN picks, walls allowed, pruned), "
-                                   "sin+pairs (SIN picks, then forward over all measured pairs) or all."),
-    margin: float = typer.Option(10.0, help="--selection model: BIC improvement an edge must bring."),
-    selection_criterion: str = typer.Option("bic", help="--selection model: bic, aic or holdout "
-                                            "(likelihood of the last 30 % of the calibration days)."),
-    solar: bool = typer.Option(True, help="Per-zone solar apertures on the data's solar: columns."),
-    intervals: str = typer.Option("profile", help="Intervals for R̄_v and τ0: profile, wald or none."),
-    method: str = typer.Option("sin", help="Concentration graphs: sin (paper) or glasso."),
-    rule: str = typer.Option("paper", help="--selection scores: paper (argmax per zone) or threshold."),
-    s_min: float = typer.Option(0.25, help="Score threshold for --rule threshold."),
-    level: float = typer.Option(0.05, help="SIN significance level."),
-    allow_parallel: bool = typer.Option(False, help="--selection scores: allow air paths beside walls "
-                                        "(open doors; --selection model always does)."),
-    estimator: str = typer.Option("nlp", help="--criterion simulation: nlp (multiple shooting, IPOPT), "
-                                  "single_shooting, grid or none."),
-    window_hours: float = typer.Option(12.0, help="--criterion simulation: cost window (h)."),
-    initial_state: str = typer.Option("paper", help="--criterion simulation: paper (mean of ends), burn_in or estimate."),
-    grid: bool = typer.Option(True, help="--criterion simulation: also run the paper's grid search (Fig. 4)."),
+    criterion: str = typer.Option(_D.estimation.criterion, help="Parameter criterion: likelihood "
+                                  "(Kalman filter, unmeasured gains as states; default), kstep "
+                                  "(k-step-ahead error from filtered states) or simulation (the "
+                                  "paper's open-loop error)."),
+    selection: str = typer.Option(_D.selection.method, help="Air paths: model (SIN candidates kept "
+                                  "by BIC on the likelihood), scores (the paper's rule on SIN "
+                                  "scores) or auto (scores with --criterion simulation, else model)."),
+    candidates: str = typer.Option(_D.selection.candidates, help="--selection model: sin (SIN "
+                                   "picks, walls allowed, pruned), sin+pairs (SIN picks, then "
+                                   "forward over all measured pairs) or all."),
+    margin: float = typer.Option(_D.selection.margin, help="--selection model: BIC improvement "
+                                 "an edge must bring."),
+    selection_criterion: str = typer.Option(_D.selection.criterion, help="--selection model: bic, "
+                                            "aic or holdout (likelihood of the last 30 % of the "
+                                            "calibration days)."),
+    solar: bool = typer.Option(_D.estimation.solar, help="Per-zone solar apertures on the data's "
+                               "solar: columns."),
+    intervals: str = typer.Option(_D.estimation.intervals, help="Intervals for R̄_v and τ0: "
+                                  "profile, wald or none."),
+    method: str = typer.Option(_D.structure.method, help="Concentration graphs: sin (paper) or "
+                               "glasso."),
+    rule: str = typer.Option(_D.structure.rule, help="--selection scores: paper (argmax per zone) "
+                             "or threshold."),
+    s_min: float = typer.Option(_D.structure.s_min, help="Score threshold for --rule threshold "
+                                "(and of the SIN candidates)."),
+    level: float = typer.Option(_D.structure.level, help="SIN significance level."),
+    allow_parallel: bool = typer.Option(_D.structure.allow_parallel, help="--selection scores: "
+                                        "allow air paths beside walls (open doors; --selection "
+                                        "model always does)."),
+    estimator: str = typer.Option(_D.estimation.estimator, help="--criterion simulation: nlp "
+                                  "(multiple shooting, IPOPT), single_shooting, grid or none."),
+    window_hours: float = typer.Option(_D.estimation.window_hours, help="--criterion simulation: "
+                                       "cost window (h)."),
+    initial_state: str = typer.Option(_D.estimation.initial_state, help="--criterion simulation: "
+                                      "paper (mean of ends), burn_in or estimate."),
+    grid: bool = typer.Option(_D.estimation.grid, help="--criterion simulation: also run the "
+                              "paper's grid search (Fig. 4)."),
     calibration: str = typer.Option(None, help="Calibration window START..END (dates)."),
     validation: str = typer.Option(None, help="Validation window START..END (dates)."),
     gap_limit: str = typer.Option("30min", help="Longest gap that is interpolated."),
-    scale: str = typer.Option(_IDENT_DEFAULTS.scale, help="--selection model: global (one "
+    scale: str = typer.Option(_D.split.scale, help="--selection model: global (one "
                               "likelihood of the whole building), local (one small problem per "
                               "measured zone, in parallel) or auto (local above "
-                              f"{_IDENT_DEFAULTS.local_above} measured zones)."),
+                              f"{_D.split.local_above} measured zones)."),
     workers: int = typer.Option(None, min=1, help="Local problems: processes (default: every core)."),
     scheduler: str = typer.Option(None, help="Local problems: a Dask scheduler address "
                                   "(tcp://HOST:8786) to run them on instead of local processes."),
-    combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="Local problems: how an air path's "
-                                "two ends decide: both (each end keeps it), sum (of their BIC changes) or either."),
-    local_rows: str = typer.Option(_IDENT_DEFAULTS.local_rows, help="Local problems: samples of "
+    combine: str = typer.Option(_D.split.combine, help="Local problems: how an air path's "
+                                "two ends decide: both (each end keeps it), sum (of their BIC "
+                                "changes) or either."),
+    local_rows: str = typer.Option(_D.split.rows, help="Local problems: samples of "
                                    "the local likelihoods: all, auto (supply-off hours when "
                                    "there are enough, as the whole-building fit) or supply_off."),
+    local_candidates: str = typer.Option(_D.split.candidates, help="Local problems: what each "
+                                         "search starts from: all (every pair with a length, "
+                                         "forward then backward) or sin (the paper's SIN on the "
+                                         "zone's neighbourhood, pruned backward)."),
+    latent_depth: int = typer.Option(_D.split.latent_depth, min=1, help="Local problems: "
+                                     "unmeasured zones a problem holds, in hops; beyond, a "
+                                     "steady-state proxy."),
     columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
                                  "column), e.g. from `thermctl spec from-brick`."),
 ):
@@ -143,15 +165,19 @@ def identify(
     else:
         meas = _read_data(data, spec, units, gap_limit=gap_limit)
     console.print(meas.quality.summary(), highlight=False)
-    opt = IdentifyOptions(criterion=criterion, selection=selection, candidates=candidates,
-                          margin=margin, selection_criterion=selection_criterion, solar=solar,
-                          intervals=intervals, structure_method=method, level=level, rule=rule,
-                          s_min=s_min, allow_parallel=allow_parallel, estimator=estimator,
-                          window_hours=window_hours, initial_state=initial_state, grid=grid,
-                          calibration=_window(calibration, "--calibration"),
-                          validation=_window(validation, "--validation"),
-                          scale=scale, workers=workers, scheduler=scheduler, combine=combine,
-                          local_rows=local_rows)
+    opt = IdentifyOptions(
+        structure=StructureOptions(method=method, level=level, rule=rule, s_min=s_min,
+                                   allow_parallel=allow_parallel),
+        selection=SelectionOptions(method=selection, candidates=candidates,
+                                   criterion=selection_criterion, margin=margin),
+        estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
+                                     estimator=estimator, window_hours=window_hours,
+                                     initial_state=initial_state, grid=grid),
+        split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
+                           rows=local_rows, candidates=local_candidates,
+                           latent_depth=latent_depth),
+        calibration=_window(calibration, "--calibration"),
+        validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:
         ident = run_identify(meas, opt, progress=_progress_callback(bar))
     paths = write_outputs(ident, out)
@@ -170,11 +196,11 @@ def identify_many(
     out: Path = typer.Option(Path("thermctl-many"), "--out", "-o", help="Output folder: one "
                              "sub-folder of outputs per building."),
     units: str = typer.Option("si", help=UNITS_HELP),
-    scale: str = typer.Option(_IDENT_DEFAULTS.scale, help="global, local or auto (as identify)."),
+    scale: str = typer.Option(_D.split.scale, help="global, local or auto (as identify)."),
     workers: int = typer.Option(None, min=1, help="Local processes (default: every core)."),
     scheduler: str = typer.Option(None, help="Dask scheduler address (tcp://HOST:8786): every "
                                   "building's local problems go there as one set of tasks."),
-    combine: str = typer.Option(_IDENT_DEFAULTS.combine, help="both, sum or either (as identify)."),
+    combine: str = typer.Option(_D.split.combine, help="both, sum or either (as identify)."),
 ):
     """Identify many buildings with the default grey-box method, as one set of tasks.
 
@@ -212,7 +238,8 @@ def identify_many(
         console.print(f"{name}: {meas.spec.name}, {len(meas.spec.zone_names)} zones, "
                       f"{len(meas)} samples", highlight=False)
         items.append(meas)
-    opt = IdentifyOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine)
+    opt = IdentifyOptions(split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler,
+                                             combine=combine)).check()
     with progress("identify-many") as bar:
         idents = run_many(items, opt, progress=_progress_callback(bar))
     t = Table("building", "zones", "air paths", "method", title="Identified")
@@ -318,7 +345,9 @@ def validate(
     cal, val = meas.split(validation=_window(validation, "--validation")
                           or _saved_window(model, "validation"))
     truth_model = _truth_model(truth, data, spec)
-    solar = model.meta.get("options", {}).get("solar", True)
+    saved = model.meta.get("options", {})
+    # nested by stage since options were grouped; flat in older model.json files
+    solar = saved.get("estimation", saved).get("solar", True)
     stage = "open loop, step responses" + (", k-step-ahead filters" if kstep else "")
     with progress("validate") as bar:       # one long step: a clock, or heartbeat lines
         cb = _progress_callback(bar)

@@ -1,0 +1,70 @@
+"""IdentifyOptions: nested by stage, contradictions rejected in one line, one place per
+default (the CLI reads the dataclasses)."""
+
+from __future__ import annotations
+
+import pytest
+
+from thermctl.errors import DataError
+from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
+                               SplitOptions, StructureOptions)
+
+
+def test_defaults_resolve_to_the_grey_box_pipeline():
+    opt = IdentifyOptions().check()
+    assert opt.selection_method == "model" and not opt.paper
+    paper = IdentifyOptions(estimation=EstimationOptions(criterion="simulation")).check()
+    assert paper.paper and paper.selection_method == "scores"
+
+
+@pytest.mark.parametrize("opt, match", [
+    (IdentifyOptions(estimation=EstimationOptions(criterion="simulation"),
+                     selection=SelectionOptions(method="model")),
+     "simulation.*selection.method='model'"),
+    (IdentifyOptions(estimation=EstimationOptions(criterion="simulation"),
+                     split=SplitOptions(scale="local")), "split.scale='local'"),
+    (IdentifyOptions(selection=SelectionOptions(method="scores"),
+                     split=SplitOptions(scale="local")), "split.scale='local'"),
+    (IdentifyOptions(split=SplitOptions(combine="majority")), "split.combine"),
+    (IdentifyOptions(split=SplitOptions(workers=0)), "split.workers"),
+    (IdentifyOptions(split=SplitOptions(latent_depth=0)), "split.latent_depth"),
+    (IdentifyOptions(structure=StructureOptions(level=1.5)), "structure.level"),
+    (IdentifyOptions(estimation=EstimationOptions(intervals="bootstrap")),
+     "estimation.intervals"),
+])
+def test_check_rejects_bad_and_contradictory_options_in_one_line(opt, match):
+    with pytest.raises(DataError, match=match) as exc:
+        opt.check()
+    assert "\n" not in str(exc.value)
+
+
+def test_local_is_chosen_by_size_unless_asked():
+    from thermctl.testbed import generate
+    spec = generate("corridor", zones=25, days=1, seed=0).spec
+    assert len(spec.measured_zones) > SplitOptions().local_above
+    assert IdentifyOptions().is_local(spec)
+    assert not IdentifyOptions(split=SplitOptions(scale="global")).is_local(spec)
+    assert not IdentifyOptions(estimation=EstimationOptions(criterion="simulation")).is_local(spec)
+
+
+def test_cli_defaults_are_the_dataclass_defaults():
+    """Every `thermctl identify` option that maps to a stage field defaults to that field."""
+    import typer.main
+
+    from thermctl.cli import app
+    cmd = typer.main.get_command(app).commands["identify"]
+    default = {p.name: p.default for p in cmd.params}
+    d = IdentifyOptions()
+    expect = {
+        "criterion": d.estimation.criterion, "selection": d.selection.method,
+        "candidates": d.selection.candidates, "margin": d.selection.margin,
+        "selection_criterion": d.selection.criterion, "solar": d.estimation.solar,
+        "intervals": d.estimation.intervals, "method": d.structure.method,
+        "rule": d.structure.rule, "s_min": d.structure.s_min, "level": d.structure.level,
+        "allow_parallel": d.structure.allow_parallel, "estimator": d.estimation.estimator,
+        "window_hours": d.estimation.window_hours, "initial_state": d.estimation.initial_state,
+        "grid": d.estimation.grid, "scale": d.split.scale, "combine": d.split.combine,
+        "local_rows": d.split.rows, "local_candidates": d.split.candidates,
+        "latent_depth": d.split.latent_depth,
+    }
+    assert {k: default[k] for k in expect} == expect
