@@ -50,7 +50,11 @@ from ..network import ThermalNetwork
 from ..spec import BuildingSpec
 from .buildings import (Layout, corridor_floor_spec, corridor_for_zones, pugh_hall_layout,
                         pugh_hall_spec)
-from .disturbances import (Disturbances, OccupancySettings, WeatherSettings, make_disturbances)
+from .disturbances import (GAIN_MODELS, Disturbances, OccupancySettings, WeatherSettings,
+                           make_disturbances)
+from .family import (add_floor_above, hide_offices, l_shape_layout, open_plan_layout,
+                     random_walls, ring_layout)
+from .fdplant import FD_NODES, FDPlant
 from .output import (SensorNoise, Truth, bas_export, json_ready, load_truth, to_imperial,
                      write_data_csv)
 from .plant import (HvacSettings, Measurement, PadeZoneStepper, Plant, VAVController,
@@ -59,17 +63,27 @@ from .plant import (HvacSettings, Measurement, PadeZoneStepper, Plant, VAVContro
 __all__ = [
     "generate", "TestbedResult", "Truth", "load_truth",
     "pugh_hall_spec", "corridor_floor_spec", "Layout",
-    "Plant", "Measurement", "VAVController", "run_closed_loop", "PadeZoneStepper",
+    "Plant", "FDPlant", "Measurement", "VAVController", "run_closed_loop", "PadeZoneStepper",
     "single_thread_blas",
     "Disturbances", "make_disturbances",
     "HvacSettings", "WeatherSettings", "OccupancySettings", "SensorNoise",
-    "BUILDINGS", "T_MIN", "T_MAX",
+    "BUILDINGS", "PLANTS", "T_MIN", "T_MAX",
 ]
 
 log = logging.getLogger(__name__)
 
-BUILDINGS = ("pugh-hall", "corridor")
+BUILDINGS = ("pugh-hall", "corridor", "ring", "ring-office", "ring-equipment", "l-shape",
+             "open-plan")
 """Names accepted by :func:`generate`."""
+
+PLANTS = ("rc", "rc-exact", "fd")
+"""Plants accepted by :func:`generate`: the 3R2C model on the Radau step (default), the
+3R2C model with exact zero-order hold of every control step, finite-volume walls
+(:class:`FDPlant`)."""
+
+_FAMILY_DEFAULTS = {"plant": "rc", "walls": "types", "wall_spec": "u_value", "gains": "arrivals",
+                    "gain_noise": None, "neighbour_noise": 0.0, "hide": 0, "floor_above": False,
+                    "fd_nodes": FD_NODES}
 
 T_MIN, T_MAX = 4.0, 20.0
 """The paper's bounds on the convection time constant per unit distance [s/m]."""
@@ -139,9 +153,20 @@ class TestbedResult:
         same offsets and noise level as the generated data.
         """
         noise = self.settings.get("noise") or {}
+        fam = {**_FAMILY_DEFAULTS, **self.settings.get("family", {})}
+        kw = dict(sensor_sd=noise.get("T_sd", 0.0), sensor_bias=self.sensor_bias,
+                  seed=self.truth.seed + 1 if seed is None else seed,
+                  sensed=self.controller_sensed)
+        if fam["plant"] == "fd":
+            return FDPlant(self.model, self.disturbances, x0=self.states[0],
+                           nodes=fam["fd_nodes"], **kw)
         return Plant(self.model, self.disturbances, x0=self.states[0],
-                     sensor_sd=noise.get("T_sd", 0.0), sensor_bias=self.sensor_bias,
-                     seed=self.truth.seed + 1 if seed is None else seed)
+                     method="exact" if fam["plant"] == "rc-exact" else "radau", **kw)
+
+    @property
+    def controller_sensed(self) -> list:
+        """Zones whose thermostats the controller reads: measured, then unlogged ones."""
+        return list(self.spec.measured_zones) + list(self.truth.details.get("sensed_unlogged", []))
 
     def write(self, outdir, units: str = "si") -> dict:
         """Write ``building.yaml``, ``data.csv``, ``truth.json`` and ``gains.csv``.
@@ -193,6 +218,13 @@ def _resolve(building, zones, seed) -> Layout:
             return pugh_hall_layout()
         if key == "corridor":
             return corridor_for_zones(50 if zones is None else zones, seed=seed)
+        if key in ("ring", "ring-hall", "ring-office", "ring-equipment"):
+            core = key.partition("-")[2] or "hall"
+            return ring_layout(3 if zones is None else _ring_side(zones), core=core, seed=seed)
+        if key in ("l-shape", "l"):
+            return l_shape_layout(seed=seed)
+        if key == "open-plan":
+            return open_plan_layout(seed=seed)
         raise SpecError(f"unknown testbed building {building!r}; choose from {list(BUILDINGS)} "
                         "or pass (spec, edges)")
     if isinstance(building, BuildingSpec):
@@ -202,6 +234,19 @@ def _resolve(building, zones, seed) -> Layout:
         return Layout.from_spec(building[0], building[1])
     raise SpecError(f"building must be a name {list(BUILDINGS)}, a BuildingSpec or "
                     f"(BuildingSpec, edges); found {type(building).__name__}")
+
+
+def _ring_side(zones):
+    if int(zones) != zones or zones < 7 or (zones - 3) % 2:
+        raise SpecError(f"zones must be an odd integer >= 7 for the ring building (2 n + 2 "
+                        f"offices and the core), found {zones!r}")
+    return (int(zones) - 3) // 2
+
+
+def _choice(name, value, allowed):
+    if value not in allowed:
+        raise SpecError(f"{name} must be one of {list(allowed)}, found {value!r}")
+    return value
 
 
 def _check(name, value, unit, lo=0.0, hi=None, positive=True):
@@ -225,6 +270,10 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
              missing: float = 0.0, noise: SensorNoise | None = SensorNoise(),
              hvac: HvacSettings = HvacSettings(), weather: WeatherSettings = WeatherSettings(),
              occupancy: OccupancySettings = OccupancySettings(), timezone: str = TIMEZONE,
+             plant: str = "rc", walls: str = "types", wall_spec: str = "u_value",
+             gains: str = "arrivals", gain_noise: float | None = None,
+             neighbour_noise: float = 0.0, hide: int = 0,
+             floor_above: bool = False, fd_nodes: int = FD_NODES,
              progress=None) -> TestbedResult:
     """Simulate a building with known convection edges operated by a VAV BAS.
 
@@ -265,6 +314,37 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
     occupancy : OccupancySettings
     timezone : str
         IANA name for the local clock that drives schedules.
+    plant : {"rc", "rc-exact", "fd"}
+        ``rc``: the true 3R2C model on the Radau IIA step (default); ``rc-exact``: the same
+        model with exact zero-order hold of each control step; ``fd``: walls resolved by
+        ``2 fd_nodes`` finite volumes each and an independent L-stable SDIRK integrator
+        (:class:`FDPlant`) — a plant that is not the identification model. ``model`` stays
+        the 3R2C description in every case.
+    walls : {"types", "random"}
+        ``types``: the layout's wall types (:data:`buildings.WALL_TYPES`, homogeneous-slab
+        split); ``random``: every wall's area, U-value and heat capacity drawn at random,
+        split 25/50/25 % in resistance (:func:`family.random_walls`).
+    wall_spec : {"u_value", "plant"}
+        With ``walls="random"``: the spec returned (and written) lists each wall's area,
+        U-value and heat capacity (homogeneous split, as a user would write it; default) or
+        the plant's own 3R2C values.
+    gains : {"arrivals", "hourly"}
+        Occupancy model: ``arrivals`` (occupants arrive, lunch and leave at random times;
+        default) or ``hourly`` (a per-day presence level, presence redrawn every hour, plus
+        white noise of :data:`disturbances.GAIN_NOISE_SD` per control step).
+    gain_noise : float, optional
+        White noise on every office's gain per control step [W]; default 30 W with
+        ``gains="hourly"``, none with ``"arrivals"``.
+    neighbour_noise : float
+        White noise on the true temperature of indoor boundary nodes (conditioned
+        neighbours) per control step [K]; 0 for none.
+    hide : int
+        Offices whose thermostat the BAS does not log (outside the true air paths; they keep
+        their VAV box and occupants).
+    floor_above : bool
+        Put a measured floor above the layout (:func:`family.add_floor_above`).
+    fd_nodes : int
+        Finite volumes per wall layer of ``plant="fd"``.
     progress : callable, optional
         ``progress(done, total)`` called as the simulation advances (control steps).
 
@@ -306,9 +386,32 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
     n_ctrl = n_burn + n_data * r
     seed = int(seed)
 
+    _choice("plant", plant, PLANTS)
+    _choice("walls", walls, ("types", "random"))
+    _choice("wall_spec", wall_spec, ("u_value", "plant"))
+    _choice("gains", gains, GAIN_MODELS)
+    neighbour_noise = _check("neighbour_noise", neighbour_noise, "[K]", positive=False)
+    if gain_noise is not None:
+        gain_noise = _check("gain_noise", gain_noise, "[W]", positive=False)
+    family = {k: v for k, v in (("plant", plant), ("walls", walls), ("wall_spec", wall_spec),
+                                ("gains", gains), ("gain_noise", gain_noise),
+                                ("neighbour_noise", neighbour_noise),
+                                ("hide", hide), ("floor_above", floor_above),
+                                ("fd_nodes", fd_nodes))
+              if v != _FAMILY_DEFAULTS[k]}
+    # the family's draws come from their own stream: the default buildings stay bit-for-bit
+    rng_family = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(24,)))
+
     layout = _resolve(building, zones, seed)
-    spec = layout.spec
-    net = ThermalNetwork(spec, layout.edges)
+    if floor_above:
+        layout = add_floor_above(layout)
+    layout = hide_offices(layout, hide, rng_family)
+    wall_draws = {}
+    if walls == "random":
+        layout, spec, wall_draws = random_walls(layout, rng_family, wall_spec)
+    else:
+        spec = layout.spec
+    net = ThermalNetwork(layout.spec, layout.edges)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v)
     p = model.p  # validates rbar_v / c_v against the number of edges
 
@@ -323,49 +426,61 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
     first = t0 - pd.Timedelta(seconds=n_burn * dt)
     time = pd.date_range(first, periods=n_ctrl, freq=pd.Timedelta(seconds=dt))
     dist = make_disturbances(layout, time, dt, rng_dist, weather, occupancy, hvac.hours,
-                             hvac.weekdays_only, hvac.T_ahu)
+                             hvac.weekdays_only, hvac.T_ahu, gains_model=gains,
+                             gain_noise=gain_noise, neighbour_noise=neighbour_noise,
+                             rng_extra=rng_family)
     if noise is None:
         dist.T_boundary_logged = dist.T_boundary.copy()
 
     # VAV boxes and set points
     boxes, heat_sp, cool_sp = {}, {}, {}
     for z in spec.zone_names:
-        if layout.kind.get(z) != "office" or z not in spec.measured_zones:
+        if layout.kind.get(z) != "office":     # hidden offices keep their box
             continue
         size = 1.0 + rng_hvac.uniform(-hvac.flow_spread, hvac.flow_spread)
         ms_max = hvac.flow_per_area * layout.floor_area[z] * size
         boxes[z] = (hvac.min_fraction * ms_max, ms_max, hvac.heat_max_fraction * ms_max)
         off = rng_hvac.normal(0.0, hvac.setpoint_sd)
         heat_sp[z], cool_sp[z] = hvac.heat_setpoint + off, hvac.cool_setpoint + off
-    ctrl = VAVController(spec.zone_names, boxes, heat_sp, cool_sp, spec.measured_zones, hvac, dt)
+    # thermostats the BAS does not log (hidden conditioned zones) come after the logged ones
+    sensed = list(spec.measured_zones) + [z for z in spec.zone_names
+                                          if z in boxes and z not in spec.measured_zones]
+    ctrl = VAVController(spec.zone_names, boxes, heat_sp, cool_sp, sensed, hvac, dt)
 
     nm = len(spec.measured_zones)
     if noise is not None:
         bias = rng_sensor.normal(0.0, noise.T_bias_sd, nm)
         flow_gain = 1.0 + rng_sensor.normal(0.0, noise.flow_gain_sd, len(spec.zone_names))
+        if len(sensed) > nm:
+            bias = np.concatenate([bias, rng_family.normal(0.0, noise.T_bias_sd, len(sensed) - nm)])
     else:
-        bias, flow_gain = np.zeros(nm), np.ones(len(spec.zone_names))
-    plant = Plant(model, dist, sensor_sd=0.0 if noise is None else noise.T_sd, sensor_bias=bias,
-                  seed=rng_sensor)
+        bias, flow_gain = np.zeros(len(sensed)), np.ones(len(spec.zone_names))
+    plant_kw = dict(sensor_sd=0.0 if noise is None else noise.T_sd, sensor_bias=bias,
+                    seed=rng_sensor, sensed=sensed)
+    if plant == "fd":
+        the_plant = FDPlant(model, dist, nodes=fd_nodes, **plant_kw)
+    else:
+        the_plant = Plant(model, dist, method="exact" if plant == "rc-exact" else "radau",
+                          **plant_kw)
 
     nz, nb = net.n_zones, len(net.boundary)
     T_rec = np.empty((n_data, nm))
     Tb_rec = np.empty((n_data, nb))
     ms_rec = np.empty((n_data, nz))
     Ts_rec = np.empty((n_data, nz))
-    X = np.empty((n_data, net.n_states))
+    X = np.empty((n_data, the_plant.n_states))
     U = np.empty((n_data, net.n_inputs))
-    meas = plant.measure()
+    meas = the_plant.measure()
     report = max(1, n_ctrl // 200)
     with single_thread_blas():
         for k in range(n_ctrl):
             ms, Ts = ctrl(meas)
             j, rem = divmod(k - n_burn, r)
             if k >= n_burn and rem == 0:
-                T_rec[j], Tb_rec[j], ms_rec[j], Ts_rec[j] = meas.T, meas.T_boundary, ms, Ts
-                X[j] = plant.x
-                U[j] = plant.inputs(ms, Ts, k)
-            meas = plant.step(ms, Ts)
+                T_rec[j], Tb_rec[j], ms_rec[j], Ts_rec[j] = meas.T[:nm], meas.T_boundary, ms, Ts
+                X[j] = the_plant.x
+                U[j] = the_plant.inputs(ms, Ts, k)
+            meas = the_plant.step(ms, Ts)
             if progress is not None and (k % report == 0 or k == n_ctrl - 1):
                 progress(k + 1, n_ctrl)
 
@@ -382,6 +497,8 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         "missing": missing, "noise": None if noise is None else asdict(noise),
         "hvac": asdict(hvac), "weather": asdict(weather), "occupancy": asdict(occupancy),
     }
+    if family:  # only what differs from the default (the default truth files stay as they were)
+        settings["family"] = family
     details = {
         "rbar_v_c_v": rc.tolist() if rc.ndim else float(rc),
         "rbar_v_c_v_bounds": [T_MIN / alpha, T_MAX / alpha],
@@ -397,6 +514,16 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         "unmeasured_zones": [z for z in net.zones if z not in spec.measured_zones],
         **dist.info,
     }
+    if family:
+        details["zone_kinds"] = dict(layout.kind)
+        details["sensed_unlogged"] = sensed[nm:]
+        if wall_draws:
+            details["walls"] = wall_draws
+            details["plant_walls"] = {w.name: {"R": list(w.R), "C": list(w.C)}
+                                      for w in layout.spec.walls}
+        if plant == "fd":
+            details["fd"] = {"nodes_per_layer": fd_nodes, "states": the_plant.n_states,
+                             "substeps": the_plant.substeps}
     truth = Truth(list(layout.edges), _plain(rbar_v), _plain(c_v), alpha, spec.alphas(), seed,
                   json_ready(settings), json_ready(details))
     log.info("testbed %s: %d zones, %d states, %d days in %.2f s", spec.name, nz, net.n_states,

@@ -29,7 +29,28 @@ from ..errors import ModelError
 from ..spec import OUTDOOR_NAMES  # boundary nodes that get the weather
 
 __all__ = ["WeatherSettings", "OccupancySettings", "Disturbances", "make_disturbances",
-           "occupied_mode", "OUTDOOR_NAMES"]
+           "occupied_mode", "OUTDOOR_NAMES", "GAIN_MODELS", "GAIN_NOISE_SD", "HOURLY_LEVEL",
+           "EQUIPMENT_ROOM"]
+
+GAIN_MODELS = ("arrivals", "hourly")
+"""Occupancy models of :func:`make_disturbances`."""
+
+HOURLY_LEVEL = (0.2, 1.0)
+"""``gains_model="hourly"``: range of the per-day presence probability of an occupant [-]
+(weekdays; a tenth of it on weekends)."""
+
+HOURLY_WEEKEND = 0.1
+"""``gains_model="hourly"``: weekend presence level as a fraction of the weekday one [-]."""
+
+HOURLY_HOURS = (8.0, 18.0)
+"""``gains_model="hourly"``: the hours [h local time] in which occupants may be present."""
+
+GAIN_NOISE_SD = 30.0
+"""``gains_model="hourly"``: white noise of every office's gain per control step [W]."""
+
+EQUIPMENT_ROOM = (25.0, 0.3)
+"""Zones of kind ``equipment`` (copy or server room): base load [W/m²] and its extra
+fraction in building hours [-]."""
 
 
 @dataclass(frozen=True)
@@ -190,6 +211,19 @@ def _local_clock(time: pd.DatetimeIndex):
     return hour, days, weekday
 
 
+def _hourly_people(rng, n_occ, hour, day, weekday_of_day, n_days):
+    """People present per control step: a per-day level, presence redrawn every hour."""
+    lo, hi = HOURLY_LEVEL
+    level = rng.uniform(lo, hi, n_days) * np.where(weekday_of_day, 1.0, HOURLY_WEEKEND)
+    slot = day * 24 + np.floor(hour).astype(int)
+    open_hours = (hour >= HOURLY_HOURS[0]) & (hour < HOURLY_HOURS[1])
+    people = np.zeros(len(hour))
+    for _ in range(n_occ):
+        present = rng.random(n_days * 24) < np.repeat(level, 24)
+        people += present[slot] & open_hours
+    return people
+
+
 def occupied_mode(time: pd.DatetimeIndex, hours=(6.0, 19.0), weekdays_only: bool = True):
     """HVAC occupied mode per time stamp: within ``hours`` [h local time], weekdays only."""
     hour, _, weekday = _local_clock(time)
@@ -201,7 +235,9 @@ def make_disturbances(layout, time: pd.DatetimeIndex, dt: float, rng: np.random.
                       weather: WeatherSettings = WeatherSettings(),
                       occupancy: OccupancySettings = OccupancySettings(),
                       hours=(6.0, 19.0), weekdays_only: bool = True,
-                      T_ahu: float = 12.8) -> Disturbances:
+                      T_ahu: float = 12.8, *, gains_model: str = "arrivals",
+                      gain_noise: float | None = None, neighbour_noise: float = 0.0,
+                      rng_extra: np.random.Generator | None = None) -> Disturbances:
     """Draw weather, neighbouring-space temperatures and heat gains for a layout.
 
     Parameters
@@ -220,6 +256,19 @@ def make_disturbances(layout, time: pd.DatetimeIndex, dt: float, rng: np.random.
     T_ahu : float
         Mean cold-deck supply air temperature [°C] (12.8 °C = 55 °F); it wanders by about
         ±0.3 K.
+    gains_model : {"arrivals", "hourly"}
+        Offices: occupants arriving, lunching and leaving at random times, or a per-day
+        presence level (:data:`HOURLY_LEVEL`) with presence redrawn every hour plus white
+        noise (:data:`GAIN_NOISE_SD`).
+    gain_noise : float, optional
+        White noise of every office's gain per control step [W]; default
+        :data:`GAIN_NOISE_SD` with ``gains_model="hourly"``, 0 otherwise.
+    neighbour_noise : float
+        White noise on indoor boundary temperatures per control step [K] (the plant feels
+        it and the BAS logs it).
+    rng_extra : numpy.random.Generator, optional
+        Draws of the neighbours' noise (kept apart from ``rng`` so that the default
+        disturbances do not change). Default: ``rng``.
 
     Returns
     -------
@@ -285,6 +334,9 @@ def make_disturbances(layout, time: pd.DatetimeIndex, dt: float, rng: np.random.
             info["neighbours"][spec.boundary[j]] = {
                 "set_point": round(float(sp[q]), 3), "outdoor_mix": round(float(mix[q]), 3),
                 "tau_float_h": round(float(tau_float[q]) / 3600.0, 3)}
+    if neighbour_noise > 0 and indoor:
+        extra = rng if rng_extra is None else rng_extra
+        T_b[:, indoor] += extra.normal(0.0, neighbour_noise, (n, len(indoor)))
     T_b_logged = T_b.copy()
     for j, b in enumerate(spec.boundary):
         if b.lower() in OUTDOOR_NAMES:
@@ -300,12 +352,28 @@ def make_disturbances(layout, time: pd.DatetimeIndex, dt: float, rng: np.random.
     for i, z in enumerate(zones):
         kind = layout.kind.get(z, "office")
         area = layout.floor_area.get(z, 0.0)
-        if kind == "hall":
+        if kind in ("hall", "lobby"):
             gains[:, i] = o.hall_lighting * area * np.where(building_hours, 1.0, 0.3)
+            if kind == "lobby":
+                gains[:, i] += layout.solar_aperture.get(z, 0.0) * solar
+            continue
+        if kind == "equipment":
+            base, extra_day = EQUIPMENT_ROOM
+            gains[:, i] = base * area * np.where(building_hours, 1.0 + extra_day, 1.0)
             continue
         n_occ = int(rng.choice(o.occupants))
         eq = 1.0 + rng.uniform(-o.equipment_spread, o.equipment_spread)
         people = np.zeros(n)
+        if gains_model == "hourly":
+            people = _hourly_people(rng, n_occ, hour, day, wd, n_days)
+            sd = GAIN_NOISE_SD if gain_noise is None else gain_noise
+            noise = sd * rng.standard_normal(n)     # drawn at any sd: same occupants
+            gains[:, i] = (o.person * people
+                           + eq * (o.equipment_standby + o.equipment_person * people)
+                           + o.lighting * area * (people > 0)
+                           + layout.solar_aperture.get(z, 0.0) * solar + noise)
+            info["offices"][z] = {"occupants": n_occ, "equipment_factor": round(eq, 4)}
+            continue
         for _ in range(n_occ):
             p_in = np.where(wd, o.presence, o.weekend_presence)
             present = rng.random(n_days) < p_in
@@ -320,6 +388,8 @@ def make_disturbances(layout, time: pd.DatetimeIndex, dt: float, rng: np.random.
         gains[:, i] = (o.person * people + eq * (o.equipment_standby + o.equipment_person * people)
                        + o.lighting * area * (people > 0)
                        + layout.solar_aperture.get(z, 0.0) * solar)
+        if gain_noise:
+            gains[:, i] += (rng if rng_extra is None else rng_extra).normal(0.0, gain_noise, n)
         info["offices"][z] = {"occupants": n_occ, "equipment_factor": round(eq, 4)}
 
     ahu = T_ahu + _ar1(rng, n, 0.3, np.exp(-dt / 7200.0))

@@ -288,7 +288,8 @@ def bas_export(layout, net, dist, rec: dict, *, n_burn: int, every: int, flow_ga
     n = len(T_rec)
     index = dist.time[n_burn::every][:n]
     nz = net.n_zones
-    box_idx = [i for i, z in enumerate(net.zones) if z in boxes]
+    # a hidden conditioned zone's box is not in the trend log either
+    box_idx = [i for i, z in enumerate(net.zones) if z in boxes and z in spec.measured_zones]
     on = ms_rec[:, box_idx] > 0
     # discharge sensor: supply temperature while the box blows, drifting to the room when off
     duct = np.empty((n, len(box_idx)))

@@ -37,7 +37,7 @@ from scipy.linalg import lapack
 
 from .._blas import single_thread_blas
 from ..errors import ModelError
-from ..model import ThermalModel
+from ..model import ThermalModel, zoh
 from .disturbances import Disturbances
 
 __all__ = ["Plant", "Measurement", "VAVController", "HvacSettings", "run_closed_loop",
@@ -317,10 +317,17 @@ class Plant:
         Integration sub-steps per control step; default ``ceil(dt / 60 s)``.
     sensor_sd : float
         Zone and boundary sensor noise [K] of the returned measurements.
-    sensor_bias : array_like, shape (n_measured,), optional
+    sensor_bias : array_like, shape (n_sensed,), optional
         Constant offsets of the zone sensors [K].
     seed : int or numpy.random.Generator, optional
         Seed of the sensor noise.
+    sensed : list of str, optional
+        Zones whose sensors :meth:`measure` reads, in this order; default the measured
+        zones. A zone with a thermostat the BAS does not log (a hidden conditioned zone)
+        is sensed but not measured.
+    method : {"radau", "exact"}
+        ``radau``: the L-stable Radau IIA step on ``substeps`` sub-steps (default);
+        ``exact``: exact zero-order hold of each control step (matrix exponential).
 
     Notes
     -----
@@ -337,38 +344,65 @@ class Plant:
     """
 
     def __init__(self, model: ThermalModel, disturbances: Disturbances, x0=None,
-                 substeps: int | None = None, sensor_sd: float = 0.0, sensor_bias=None, seed=None):
+                 substeps: int | None = None, sensor_sd: float = 0.0, sensor_bias=None, seed=None,
+                 *, sensed=None, method: str = "radau"):
         net = model.network
         d = disturbances
         if list(d.zones) != net.zones or list(d.boundary) != net.boundary:
             raise ModelError("Plant: disturbances are for zones/boundary "
                              f"{d.zones}/{d.boundary}, the model has {net.zones}/{net.boundary}")
+        if method not in ("radau", "exact"):
+            raise ModelError(f"Plant: method must be 'radau' or 'exact', found {method!r}")
         self.model = model
         self.network = net
         self.disturbances = d
         self.dt = float(d.dt)
+        self.method = method
         self.substeps = substeps or max(1, math.ceil(self.dt / 60.0))
+        self._build()
+        self._init_sensors(sensed, sensor_sd, sensor_bias, seed)
+        if x0 is None:
+            u = self.inputs(np.zeros(net.n_zones), np.full(net.n_zones, 20.0), 0)
+            x0 = self.steady_state(u)
+        self.x0 = np.asarray(x0, dtype=float).copy()
+        if self.x0.shape != (self.n_states,):
+            raise ModelError(f"Plant: x0 needs shape ({self.n_states},), found {self.x0.shape}")
+        self.reset()
+
+    def _build(self):
+        """The stepper of the 3R2C model (Radau IIA through the zones, or exact ZOH)."""
+        model, net = self.model, self.network
         A, Bt = model.matrices()
         self._Bt = Bt.toarray() if net.n_states <= _DENSE_STATES else sp.csr_matrix(Bt)
-        self._stepper = PadeZoneStepper(A, net.n_zones, self.dt, self.substeps)
+        if self.method == "exact":
+            self._A = A
+            self._zoh_cache = {}
+        else:
+            self._stepper = PadeZoneStepper(A, net.n_zones, self.dt, self.substeps)
         self._kz = np.asarray(model.sym.kz, dtype=float)
         self._inv_cz = np.asarray(model.sym.inv_cz, dtype=float)
-        self._meas_idx = np.array([net.zones.index(z) for z in net.measured_zones], dtype=int)
+        self.n_states = net.n_states
+
+    def _init_sensors(self, sensed, sensor_sd, sensor_bias, seed):
+        net = self.network
+        names = net.measured_zones if sensed is None else list(sensed)
+        unknown = [z for z in names if z not in net.zones]
+        if unknown:
+            raise ModelError(f"Plant: sensed zone(s) {unknown} are not zones of the model")
+        self._meas_idx = np.array([net.zones.index(z) for z in names], dtype=int)
+        self.sensed = list(names)
         self.sensor_sd = float(sensor_sd)
         nm = len(self._meas_idx)
         self.sensor_bias = np.zeros(nm) if sensor_bias is None else np.asarray(sensor_bias, float)
         if self.sensor_bias.shape != (nm,):
-            raise ModelError(f"Plant: sensor_bias needs {nm} values (measured zones), "
+            raise ModelError(f"Plant: sensor_bias needs {nm} values (sensed zones), "
                              f"found shape {self.sensor_bias.shape}")
         self._rng = np.random.default_rng(seed)
-        self._t0 = d.time[0]
-        if x0 is None:
-            u = self.inputs(np.zeros(net.n_zones), np.full(net.n_zones, 20.0), 0)
-            x0 = model.steady_state(u)
-        self.x0 = np.asarray(x0, dtype=float).copy()
-        if self.x0.shape != (net.n_states,):
-            raise ModelError(f"Plant: x0 needs shape ({net.n_states},), found {self.x0.shape}")
-        self.reset()
+        self._t0 = self.disturbances.time[0]
+
+    def steady_state(self, u) -> np.ndarray:
+        """Steady state [°C] for the constant input vector ``u`` (``network.input_names``)."""
+        return self.model.steady_state(u)
 
     # ---- state --------------------------------------------------------------
     def reset(self, x0=None) -> None:
@@ -440,14 +474,28 @@ class Plant:
                                  f"{[float(m) for m in ms if not 0 <= m < np.inf]}")
             bad = [z for z, t in zip(self.network.zones, Ts) if not -np.inf < t < np.inf]
             raise ModelError(f"Plant.step: supply temperature must be finite [°C]; zone(s) {bad}")
+        self.x = self._advance(ms, Ts, self.k)
+        self.k += 1
+        return self.measure()
+
+    def _advance(self, ms, Ts, k):
+        """The state after holding ``ms``, ``Ts`` and step ``k``'s disturbances over ``dt``."""
+        nz = self.network.n_zones
         d = self.disturbances
-        k = self.k
         a = ms * self._kz
         b = self._Bt @ d.T_boundary[k]
         b[:nz] += a * Ts + d.gains[k] * self._inv_cz
-        self.x = self._stepper.step(self.x, a, b)
-        self.k += 1
-        return self.measure()
+        if self.method == "exact":
+            key = a.tobytes()
+            if key not in self._zoh_cache:
+                if len(self._zoh_cache) > 64:
+                    self._zoh_cache.clear()
+                A_u = sp.lil_matrix(self._A, copy=True)
+                A_u.setdiag(A_u.diagonal() - np.concatenate([a, np.zeros(self.n_states - nz)]))
+                self._zoh_cache[key] = zoh(A_u, self.dt)
+            Phi, Gamma = self._zoh_cache[key]
+            return Phi @ self.x + Gamma @ b
+        return self._stepper.step(self.x, a, b)
 
 
 def _vector(v, n, name):
