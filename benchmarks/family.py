@@ -1,0 +1,232 @@
+"""`thermctl identify` defaults on the broadened testbed family, and what biases R̄_v there.
+
+Two studies, each one ``thermctl.identify.identify(meas, IdentifyOptions())`` per row (the
+CLI's defaults, nothing tuned), on ``--days`` of 5-min data (default 16: thermctl's
+default split validates on the last quarter, calibrates on 12 days, enough for SIN on 9
+measured zones):
+
+* ``factors`` — Pugh Hall's 7-zone section with one factor of the data-generating process
+  switched at a time from the default testbed, then all of them, then all of them on the
+  finite-volume plant: control at the data step with exact ZOH (``control_minutes=5,
+  plant="rc-exact"``), random walls (published as U-value and capacity: the homogeneous
+  split the user writes, not the plant's 25/50/25 %), the same walls published exactly,
+  hourly occupancy (per-day level, hourly presence, white noise), white noise on the
+  conditioned neighbours (0.2 K), and the walls resolved by finite volumes (``fd``);
+* ``family`` — the new layouts (a ring of offices around a circulation core; a ring
+  around a conditioned core with one more office hidden; an L-shaped floor with two
+  corridors, a lobby and a measured floor above; an open plan) with every factor on,
+  once on the 3R2C plant with exact ZOH and once on the finite-volume plant.
+
+Columns: ``recall`` (true air paths between measured zones found / those true air paths),
+``false`` (air paths found that are not true), ``R̄v`` (geometric mean of the model's
+R̄_v over its air paths), ``err`` (|R̄v / truth − 1|, truth 3.36e-4), ``90 % interval``
+and ``cover`` (whether it holds the truth; shared R̄_v only), ``step`` / ``cond``
+(step-response error of the identified / the conduction-only model against the truth's,
+heat into each zone at minimum flow, mean of 1, 6 and 24 h; the truth is the 3R2C model
+for ``rc`` plants and the finite-volume plant itself for ``fd``), and the time of
+``identify``.
+
+Every row is appended as JSON to ``benchmarks/results/family-runs.jsonl`` when it is done
+(``--save``), so an interrupted study keeps what it finished; ``--table`` rebuilds the
+tables from that file.
+
+Usage::
+
+    nice -n 5 python benchmarks/family.py --study factors --save
+    nice -n 5 python benchmarks/family.py --study family --save
+    python benchmarks/family.py --table        # → benchmarks/results/family.txt
+    python benchmarks/family.py --quick        # one 4-zone building, 6 days (a smoke test)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from thermctl.data import read_measurements
+from thermctl.identify import IdentifyOptions, identify
+from thermctl.model import ThermalModel
+from thermctl.testbed import disturbances, generate
+from thermctl.validate import minimum_flows, relative_error, step_response_matrix
+
+RESULTS = Path(__file__).parent / "results"
+RUNS = RESULTS / "family-runs.jsonl"
+HORIZONS_H = (1.0, 6.0, 24.0)
+
+ALL = dict(walls="random", gains="hourly", neighbour_noise=0.2, control_minutes=5)
+
+FACTORS = {
+    # name: generate() arguments on Pugh Hall (the default testbed = "baseline")
+    "baseline": {},
+    "control at data step (exact ZOH)": dict(control_minutes=5, plant="rc-exact"),
+    "random walls, published U/C": dict(walls="random"),
+    "random walls, published exactly": dict(walls="random", wall_spec="plant"),
+    "hourly occupancy + noise": dict(gains="hourly"),
+    "noise on neighbours 0.2 K": dict(neighbour_noise=0.2),
+    "finite-volume walls": dict(plant="fd"),
+    # which part of the hourly occupancy model moves R̄_v
+    "hourly occupancy, no noise": dict(gains="hourly", gain_noise=0.0),
+    "arrivals + 30 W noise": dict(gain_noise=30.0),
+    "hourly occupancy, no weekend presence": dict(gains="hourly", _hourly_weekend=0.0),
+    "all (rc, exact ZOH)": dict(ALL, plant="rc-exact"),
+    "all (fd)": dict(ALL, plant="fd"),
+}
+
+LAYOUTS = {
+    "ring": dict(building="ring"),
+    "ring-office+hidden": dict(building="ring-office", hide=1),
+    "l-shape+above": dict(building="l-shape", floor_above=True),
+    "open-plan": dict(building="open-plan"),
+}
+
+
+def run_case(study, name, kwargs, seed, days):
+    """Generate, identify with the defaults, score; one dict."""
+    t0 = time.perf_counter()
+    gen_kw = {k: v for k, v in kwargs.items() if not k.startswith("_")}
+    weekend = disturbances.HOURLY_WEEKEND
+    try:
+        # a diagnostic variant: the hourly model's weekend level (a module constant)
+        disturbances.HOURLY_WEEKEND = kwargs.get("_hourly_weekend", weekend)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tb = generate(days=days, seed=seed, **gen_kw)
+    finally:
+        disturbances.HOURLY_WEEKEND = weekend
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meas = read_measurements(tb.data, tb.spec, name=name)
+    t_gen = time.perf_counter() - t0
+    measured = set(tb.spec.measured_zones)
+    true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
+    visible = {p for p in true if set(p) <= measured}
+    row = dict(study=study, case=name, seed=seed, days=days, kwargs=kwargs,
+               building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
+               true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
+    t1 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ident = identify(meas)
+    except Exception as exc:            # noqa: BLE001 - a failing run is a result
+        row["error"] = f"{type(exc).__name__}: {str(exc)[:120]}"
+        return row
+    row["identify_s"] = round(time.perf_counter() - t1, 1)
+    model = ident.model
+    found = {tuple(sorted((e.a, e.b))) for e in model.network.convection_edges}
+    row["found"] = sorted(found)
+    row["recall_hits"] = len(found & visible)
+    row["false"] = len(found - visible)
+    rb = np.atleast_1d(np.asarray(model.rbar_v, float)) if found else np.array([])
+    r_true = float(np.exp(np.mean(np.log(np.atleast_1d(tb.truth.rbar_v)))))
+    row["rbar_v"] = float(np.exp(np.mean(np.log(rb)))) if rb.size else None
+    row["rbar_err"] = abs(row["rbar_v"] / r_true - 1.0) if rb.size else None
+    iv = getattr(ident.intervals, "intervals", {}) or {}
+    if "rbar_v" in iv:
+        i = iv["rbar_v"]
+        row["interval"] = [float(i.lower), float(i.upper)]
+        row["covers"] = bool(i.lower <= r_true <= i.upper)
+    row["notes"] = [str(n)[:200] for n in ident.notes]
+    ms_min = minimum_flows(tb.inputs[:, tb.network.input_slices()["ms"]])
+    if tb.settings.get("family", {}).get("plant") == "fd":
+        G0 = tb.plant().step_responses(ms_min, HORIZONS_H)
+    else:
+        G0 = step_response_matrix(tb.model, ms_min, HORIZONS_H)
+    cond = ThermalModel(tb.network.conduction_only())
+    row["step_err"] = float(np.mean(relative_error(step_response_matrix(model, ms_min, HORIZONS_H), G0)))
+    row["cond_err"] = float(np.mean(relative_error(step_response_matrix(cond, ms_min, HORIZONS_H), G0)))
+    row["truth3r2c_err"] = float(np.mean(relative_error(
+        step_response_matrix(tb.model, ms_min, HORIZONS_H), G0)))
+    return row
+
+
+def _fmt(v, spec):
+    return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
+
+
+def table(rows, study):
+    rows = [r for r in rows if r["study"] == study]
+    head = (f"| case | seed | zones (meas) | recall | false | R̄v | err | 90 % interval | cover "
+            f"| step | cond | 3R2C truth | s |")
+    lines = [head, "|" + "---|" * 13]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['case']} | {r['seed']} | {r['zones']} ({r['measured']}) | "
+                         f"failed: {r['error']} |" + " |" * 9)
+            continue
+        n_true = len(r["true"])
+        iv = r.get("interval")
+        lines.append(
+            f"| {r['case']} | {r['seed']} | {r['zones']} ({r['measured']}) | "
+            f"{r['recall_hits']}/{n_true} | {r['false']} | {_fmt(r['rbar_v'], '.3g')} | "
+            f"{_fmt(r['rbar_err'], '.0%')} | "
+            + (f"[{iv[0]:.3g}, {iv[1]:.3g}]" if iv else "—") + " | "
+            + ("yes" if r.get("covers") else "no" if "covers" in r else "—") + " | "
+            f"{_fmt(r['step_err'], '.1%')} | {_fmt(r['cond_err'], '.1%')} | "
+            f"{_fmt(r['truth3r2c_err'], '.1%')} | {r.get('identify_s', 0):.0f} |")
+    ok = [r for r in rows if "error" not in r]
+    if ok:
+        n_true = sum(len(r["true"]) for r in ok)
+        errs = [r["rbar_err"] for r in ok if r["rbar_err"] is not None]
+        cov = [r["covers"] for r in ok if "covers" in r]
+        lines.append(
+            f"| **all {len(ok)}** | | | {sum(r['recall_hits'] for r in ok) / max(n_true, 1):.2f} | "
+            f"{np.mean([r['false'] for r in ok]):.2f}/bld | | "
+            f"med {_fmt(float(np.median(errs)) if errs else None, '.0%')} | | "
+            f"{sum(cov)}/{len(cov)} | med {np.median([r['step_err'] for r in ok]):.1%} | "
+            f"med {np.median([r['cond_err'] for r in ok]):.1%} | | |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--study", choices=["factors", "family"], default="factors")
+    ap.add_argument("--cases", nargs="+", help="only these case names")
+    ap.add_argument("--plants", nargs="+", default=["rc-exact", "fd"],
+                    help="family study: plants (default both)")
+    ap.add_argument("--days", type=float, default=16.0)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--save", action="store_true", help=f"append rows to {RUNS}")
+    ap.add_argument("--table", action="store_true", help=f"print the tables of {RUNS}")
+    ap.add_argument("--quick", action="store_true", help="one small building, 6 days")
+    args = ap.parse_args(argv)
+    logging.getLogger("thermctl").setLevel(logging.ERROR)
+    if args.table:
+        rows = [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()]
+        out = []
+        for study in ("factors", "family"):
+            out += [f"## {study}", "", table(rows, study), ""]
+        text = "\n".join(out)
+        (RESULTS / "family.txt").write_text(text + "\n")
+        print(text)
+        return rows
+    if args.quick:
+        jobs = [("quick", "quick", dict(building="ring", zones=7, **ALL, plant="fd"), 0, 6.0)]
+    elif args.study == "factors":
+        jobs = [("factors", n, k, s, args.days) for n, k in FACTORS.items()
+                for s in args.seeds if not args.cases or n in args.cases]
+    else:
+        jobs = [("family", f"{n} ({p})", dict(k, **ALL, plant=p), s, args.days)
+                for n, k in LAYOUTS.items() for p in args.plants for s in args.seeds
+                if not args.cases or n in args.cases]
+    rows = []
+    for study, name, kw, seed, days in jobs:
+        row = run_case(study, name, kw, seed, days)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        if args.save:
+            with RUNS.open("a") as f:
+                f.write(json.dumps(row) + "\n")
+    print()
+    print(table(rows, jobs[0][0] if jobs else "factors"))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
