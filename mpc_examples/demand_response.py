@@ -13,8 +13,9 @@ building's dynamics*:
   (weekdays 12:00–18:00); boiler fuel 0.035 $/kWh.
 * **Peak-demand charge** 15 $/kW on the highest 15-min electric power (a month's charge,
   set by this day).
-* **Demand-response event** 14:00–16:00: electric power capped at the fans' power at the
-  boxes' minimum flows (the chiller's share shed), soft, 2 $/kWh above the cap. Cooling
+* **Demand-response event** 14:00–16:00: electric power capped at 1.1 × what ventilation
+  alone needs (fans and coil at the boxes' minimum flows, offices at 24 °C, the event's
+  outdoor temperature): every extra cooling flow shed; soft, 2 $/kWh above the cap. Cooling
   the offices *before* the event, through the walls' mass, is what pays.
 * **An undersized box**: office r240's box delivers 35 % of its design flow (its minimum
   stays). r240 has a true air path to r243 (2.8 m): when r240 overheats, over-cooling r243
@@ -70,7 +71,7 @@ class TariffSettings:
     event : (float, float)
         Demand-response event [h local time] (on the control period's first weekday).
     cap_factor : float
-        Event cap as a multiple of the fans' power at the boxes' minimum flows [-].
+        Event cap as a multiple of the ventilation-only electric power [-].
     cap_penalty : float
         [$/kWh] above the cap.
     """
@@ -126,11 +127,23 @@ def make_dr_scenario(seed: int = 0, hours: float = 24.0, horizon_hours: float = 
     ms_max[j] *= small_fraction
     ms_min = np.minimum(np.array(hv.ms_min, float), ms_max)
     hvac = replace(hv, ms_min=ms_min, ms_max=ms_max)
-    # the cap: the fans at the minimum flows (what ventilation needs), chiller shed
-    fan_min = hvac.fan_power(np.asarray(ms_min)) / 1e3
+    # the cap: what ventilation alone needs during the event — fans and coil at the minimum
+    # flows with the offices at the band's top and the event's mean outdoor temperature;
+    # any extra cooling flow is shed
+    d = scn.tb.disturbances
+    h = np.asarray(d.time.hour + d.time.minute / 60.0, float)
+    day = np.asarray(d.time.normalize()) == np.asarray(scn.start.normalize())
+    ev = day & (h >= tariff.event[0]) & (h < tariff.event[1])
+    from .simulator import _outdoor
+    T_o = float(d.T_boundary[ev, d.boundary.index(_outdoor(d.boundary))].mean())
+    ms = np.asarray(ms_min)[None, :]
+    T_c = float(scn.tb.controller.settings.T_ahu)
+    p = hvac.powers(ms, np.full_like(ms, T_c), np.full_like(ms, scn.band.occupied[1]),
+                    np.array([T_o]), np.array([T_c]))
+    base_kw = float(p["fan"][0] + p["cooling"][0] / hvac.cop_cool) / 1e3
     area = sum(z.volume for z in scn.tb.spec.zones) / 3.0     # 3 m rooms [m²]
     return DRScenario(scn.tb, scn.k0, scn.n_steps, hvac, scn.band, scn.comfort_zones,
-                      tariff=tariff, cap_kw=tariff.cap_factor * float(fan_min), area=area)
+                      tariff=tariff, cap_kw=tariff.cap_factor * base_kw, area=area)
 
 
 def small_box_baseline(scn: DRScenario, margin: float = 0.5):

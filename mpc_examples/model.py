@@ -69,17 +69,22 @@ def identified_model(tb, end=None, **options) -> ThermalModel:
     ThermalModel
     """
     from thermctl.data import read_measurements
-    from thermctl.identify import IdentifyOptions, identify
+    from thermctl.identify import EstimationOptions, IdentifyOptions, SelectionOptions, identify
 
     data = tb.data if end is None else tb.data.loc[tb.data.index < end]
     meas = read_measurements(data, tb.spec, name="testbed data")
     # the last day the data cover whole: it ends at (last time stamp + one step)
     last_day = (meas.end + meas.step - pd.Timedelta(days=1)).normalize()
-    opt = IdentifyOptions(**{"grid": False, "intervals": "none",
-                             "validation": (str(last_day.date()), None), **options})
+    options = dict(options)
+    est = {"grid": options.pop("grid", False), "intervals": options.pop("intervals", "none")}
+    if "criterion" in options:
+        est["criterion"] = options.pop("criterion")
+    sel = {"method": options.pop("selection")} if "selection" in options else {}
+    opt = IdentifyOptions(estimation=EstimationOptions(**est), selection=SelectionOptions(**sel),
+                          validation=(str(last_day.date()), None), **options)
     model = identify(meas, opt).model
     log.info("identified (criterion %s, selection %s): edges %s, rbar_v %s, c_v %s",
-             opt.criterion, opt.selection,
+             opt.estimation.criterion, opt.selection.method,
              [(e.a, e.b) for e in model.network.convection_edges], model.rbar_v, model.c_v)
     return model
 

@@ -523,3 +523,36 @@ def test_tariff_event_cap_and_peak(small_model, hvac, comfort_zones):
     assert event[on].max() < 0.9 * free[on].max()
     # and cools earlier (pre-cooling): more electric power before the event than without it
     assert event[:8].sum() > free[:8].sum()
+
+
+@pytest.mark.slow
+def test_scaling_benchmark_small(tmp_path):
+    """The scaling benchmark's command line on the 7-zone building: every sparse form and
+    model runs, solves succeed, the sparse QP carries fewer nonzeros than the dense one."""
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    cmd = [sys.executable, "-m", "mpc_examples.scaling", "--zones", "7", "--solves", "2",
+           "--forms", "zoh", "euler", "radau", "--solvers", "piqp", "--models", "full", "no-conv",
+           "--per-zone", "--out", str(tmp_path)]
+    out = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    df = pd.read_csv(tmp_path / "scaling.csv")
+    assert (df["failures"] == 0).all() and (df["solves"] == 2).all()
+    lin = df[(df["MPC"] == "linear") & (df["model"] == "full")].set_index("form")
+    assert lin.loc["euler", "nonzeros"] < 0.2 * lin.loc["zoh", "nonzeros"]
+    assert "no-conv: 55 -> 49 states" in (tmp_path / "scaling.txt").read_text()
+
+
+@pytest.mark.slow
+def test_demand_response_example(tmp_path):
+    """The DR day, true and conduction-only models, 12:00-17:00 (the event at 14-16 h): the
+    MPC sheds load in the event where the band-set-point BAS does not."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", MPLBACKEND="Agg")
+    cmd = [sys.executable, "-m", "mpc_examples.demand_response", "--model", "true,conduction-only",
+           "--start-hour", "12", "--hours", "5", "--warmup", "24", "--out", str(tmp_path)]
+    out = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-3000:]
+    t = pd.read_csv(tmp_path / "demand_response.csv", index_col=0)
+    base, true = t.loc["baseline (band set points)"], t.loc["linear MPC (true model)"]
+    assert true["failures"] == 0
+    assert true["event excess [kWh]"] < base["event excess [kWh]"]
+    assert true["cost [$]"] < base["cost [$]"]
