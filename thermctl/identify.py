@@ -66,9 +66,11 @@ class StructureOptions:
         _one_of("structure", "method", self.method, ("sin", "glasso"))
         _one_of("structure", "rule", self.rule, ("paper", "threshold"))
         if not 0.0 < self.level < 1.0:
-            raise DataError(f"identify option structure.level must be in (0, 1), found {self.level}")
+            raise DataError(f"identify option structure.level must be in (0, 1), found "
+                            f"{self.level}")
         if not 0.0 <= self.s_min <= 1.0:
-            raise DataError(f"identify option structure.s_min must be in [0, 1], found {self.s_min}")
+            raise DataError(f"identify option structure.s_min must be in [0, 1], found "
+                            f"{self.s_min}")
 
 
 @dataclass
@@ -380,8 +382,9 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     notes = []
     if progress:
         progress("structure", 0, 1)
-    sid = StructureIdentifier(method=opt.structure.method, level=opt.structure.level, rule=opt.structure.rule,
-                              s_min=opt.structure.s_min, allow_parallel=opt.structure.allow_parallel)
+    st = opt.structure
+    sid = StructureIdentifier(method=st.method, level=st.level, rule=st.rule, s_min=st.s_min,
+                              allow_parallel=st.allow_parallel)
     sid.fit(cal.frame, net0)
     if progress:
         progress("structure", 1, 1)
@@ -436,7 +439,8 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
             dist = {p: spec.air_path_length(*p)[0] for p in sid.candidates_}
             picks = {tuple(sorted((e.a, e.b))) for e in sid.edges_}
             picks |= {tuple(sorted((e.a, e.b))) for e in rule_edges(
-                {p: sid.scores_[p] for p in dist}, dist, sid.zones_, "threshold", opt.structure.s_min)}
+                {p: sid.scores_[p] for p in dist}, dist, sid.zones_, "threshold",
+                opt.structure.s_min)}
             cands = sorted(picks)
             if opt.selection.candidates == "sin+pairs":
                 # SIN's picks are the start; every measured pair may still enter, and the
@@ -469,11 +473,11 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
         direction = "backward" if sid is not None and start is None else "both"
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
-            sel = select_air_paths(spec, cal, candidates=cands, criterion=opt.selection.criterion,
-                               direction=direction, margin=opt.selection.margin, progress=say,
-                               on_fit=on_fit,
-                               start=start or (),
-                               final_criterion=opt.estimation.criterion, solar=opt.estimation.solar)
+            sel = select_air_paths(spec, cal, candidates=cands,
+                                   criterion=opt.selection.criterion, direction=direction,
+                                   margin=opt.selection.margin, progress=say, on_fit=on_fit,
+                                   start=start or (), final_criterion=opt.estimation.criterion,
+                                   solar=opt.estimation.solar)
         net = ThermalNetwork(spec, sel.edges)
         if not sel.edges:
             notes.append("the data support no convection edge: the model is conduction-only")
@@ -502,11 +506,13 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     (small buildings) or the local per-edge R̄_v (large ones)."""
     from .local import identify_local
 
-    li = identify_local(meas.spec, cal.frame, rule=opt.split.combine, criterion=opt.selection.criterion,
-                        margin=opt.selection.margin, solar=opt.estimation.solar, workers=opt.split.workers,
+    li = identify_local(meas.spec, cal.frame, rule=opt.split.combine,
+                        criterion=opt.selection.criterion, margin=opt.selection.margin,
+                        solar=opt.estimation.solar, workers=opt.split.workers,
                         client=client or opt.split.scheduler, progress=progress,
                         fit_rows=opt.split.rows, latent_depth=opt.split.latent_depth,
-                        candidates=opt.split.candidates, level=opt.structure.level, s_min=opt.structure.s_min)
+                        candidates=opt.split.candidates, level=opt.structure.level,
+                        s_min=opt.structure.s_min)
     return _finish_local(meas, cal, val, opt, li, progress)
 
 
@@ -642,8 +648,8 @@ def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
     from .estimate.likelihood import LikelihoodEstimator
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
-        gb = LikelihoodEstimator(net, criterion=opt.estimation.criterion, solar=opt.estimation.solar,
-                              per_edge=per_edge).fit(cal, init=init)
+        gb = LikelihoodEstimator(net, criterion=opt.estimation.criterion,
+                                 solar=opt.estimation.solar, per_edge=per_edge).fit(cal, init=init)
     return gb, _intervals(gb, opt, notes, cal)
 
 
@@ -686,9 +692,9 @@ def _misfit_note(ida, opt, notes):
     notes.append(
         f"the model's one-step innovations are far from white (sandwich/Hessian variance ratio "
         f"{iv.inflation:.0f} for R̄_v): the likelihood overstates the evidence, so "
-        f"{opt.selection.criterion.upper()} differences of edges are inflated about that much and "
-        "edges kept with a margin of "
-        f"{opt.selection.margin:g} may be spurious. Check the structure with --selection-criterion holdout "
+        f"{opt.selection.criterion.upper()} differences of edges are inflated about that much "
+        f"and edges kept with a margin of {opt.selection.margin:g} may be spurious. Check the "
+        "structure with --selection-criterion holdout "
         "(held-back days) or a larger --margin, and the spec (zone heat capacities, missing "
         "internal mass) — measured on the twin house in benchmarks/results/twinhouse.txt.")
 

@@ -93,12 +93,12 @@ def sin_candidates(spec, data, level: float = 0.05, allow_parallel: bool = True)
     return [_cand(spec, p) for p in sorted(out)]
 
 
-def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic", direction: str = "both",
-                 start=(), max_edges: int | None = None, holdout: float = 0.3,
-                 final_per_edge: bool = False, final_criterion: str = "likelihood",
-                 max_iter: int = 200, margin: float = 10.0,
-                 screen: str = "grid", progress=None, on_fit=None,
-                 **estimator_kwargs) -> SelectionResult:
+def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
+                     direction: str = "both", start=(), max_edges: int | None = None,
+                     holdout: float = 0.3, final_per_edge: bool = False,
+                     final_criterion: str = "likelihood", max_iter: int = 200,
+                     margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
+                     **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
