@@ -181,6 +181,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     rows, errors = [], []
+    args.out.mkdir(parents=True, exist_ok=True)
     for z in args.zones:
         hours = (max(args.solves, args.solves_large) + 1) * args.step / 60.0
         scn = make_scenario(z, args.seed, hours, args.horizon, start_day=3,
@@ -204,7 +205,12 @@ def main(argv=None):
                     rows.append(_row(kind, form, solver, z, name, model, note=f"failed: {exc!r}"))
                 r = rows[-1]
                 print(f"  {kind} {form} {solver}, {r['zones']} zones, {name} ({r['states']} "
-                      f"states): median {r['solve median [s]']:.3f} s {r['note']}", flush=True)
+                      f"states, {r['variables']:.0f} variables, {r['nonzeros']:.0f} nonzeros): "
+                      f"build {r['build [s]']:.2f} s, median {r['solve median [s]']:.3f} s, "
+                      f"max {r['solve max [s]']:.3f} s, CPU median {r['CPU median [s]']:.3f} s, "
+                      f"failures {r['failures']} {r['note']}", flush=True)
+                # the table so far, in case a long run is stopped
+                pd.DataFrame(rows).set_index("MPC").to_csv(args.out / "scaling.partial.csv")
     df = pd.DataFrame(rows).set_index("MPC")
     text = format_table(df)
     err_lines = ["", "reductions (step-response error, relative, of the linearization at the "

@@ -332,6 +332,7 @@ def _run_example(module, tmp_path, *extra):
     return out.stdout
 
 
+@pytest.mark.slow   # identification in a subprocess: 1-3 min each on a shared machine
 @pytest.mark.parametrize("module, stem, extra", [
     ("mpc_examples.economic_mpc", "economic_mpc", ("--no-figure", "--no-band-baseline")),
     ("mpc_examples.linear_mpc", "linear_mpc", ()),
@@ -368,6 +369,7 @@ def test_example_fast_mode(tmp_path, module, stem, extra):
         assert (tmp_path / f"{stem}.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow   # 12 closed-loop QPs on the testbed: about a minute
 def test_minimal_linear_example():
     """The copyable example (mpc_examples/linear_mpc_minimal.py), fast mode: true model inside,
     Monday 06:00-09:00 (12 QPs of 15 min: the warm-up from 06:00, comfort from 07:00).
@@ -485,8 +487,8 @@ def test_economic_on_reduced_network(small_model, hvac, comfort_zones):
     the ReducedNetwork): solves, and plans within 1 % of the full model's energy."""
     from mpc_examples.sparse import eliminate_fast_edges
 
-    N = 16
-    fc, x0 = _forecast(small_model, N), _x0(small_model)
+    N = 12
+    fc, x0 = _forecast(small_model, N, start_hour=5.0), _x0(small_model)
     rnet, _ = eliminate_fast_edges(small_model, _op_small(small_model, hvac), error=False)
     full = EconomicMPC(small_model, hvac, comfort_zones, dt=DT, horizon=N, substeps=3)
     red = EconomicMPC(rnet, hvac, comfort_zones, dt=DT, horizon=N, substeps=3)
