@@ -68,3 +68,42 @@ def test_cli_defaults_are_the_dataclass_defaults():
         "latent_depth": d.split.latent_depth,
     }
     assert {k: default[k] for k in expect} == expect
+
+
+def test_paths_disagree_by_more_than_a_factor_two():
+    from thermctl.identify import PATHS_DISAGREE, paths_disagree
+    assert PATHS_DISAGREE == 2.0
+    # the Pugh Hall testbed's true structure: 1.5× spread, one shared value is fine
+    assert paths_disagree({"air:r240-r243": 4.65e-4, "air:r241-r247": 3.05e-4,
+                           "air:r242-r244": 3.37e-4}) is None
+    # finite-volume walls, two false paths kept: 3.1×
+    assert paths_disagree({"air:r240-r243": 4.29e-4, "air:r241-r244": 7.67e-4,
+                           "air:r241-r247": 5.55e-4, "air:r242-r247": 1.34e-3}) == (4.29e-4, 1.34e-3)
+    assert paths_disagree({"air:a-b": 1e-4}) is None
+    assert paths_disagree({"air:a-b": 1e-4, "air:b-c": float("nan")}) is None
+
+
+@pytest.mark.slow
+def test_disagreeing_paths_get_one_rbar_each_on_finite_volume_walls():
+    """On the finite-volume plant the default keeps false paths; their per-path R̄_v differ
+    by more than 2×, and the model then carries one R̄_v per path (closer to the truth for
+    the true paths than the shared compromise)."""
+    import warnings
+
+    import numpy as np
+
+    from thermctl.data import read_measurements
+    from thermctl.identify import identify
+    from thermctl.testbed import generate
+    tb = generate("pugh-hall", days=14, seed=0, plant="fd")
+    meas = read_measurements(tb.data, tb.spec, name="tb")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = identify(meas, IdentifyOptions(estimation=EstimationOptions(intervals="wald")))
+    rb = np.atleast_1d(ident.model.rbar_v)
+    assert rb.size == len(ident.model.network.convection_edges) > 1
+    assert any("disagree on R̄_v" in n for n in ident.notes)
+    true = {(e.a, e.b) for e in tb.model.network.convection_edges}
+    for e, r in zip(ident.model.network.convection_edges, rb):
+        if (e.a, e.b) in true:
+            assert abs(r / 3.36e-4 - 1) < 0.8
