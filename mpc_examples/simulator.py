@@ -297,6 +297,10 @@ def run_example(kind: str, cls, argv=None):
         parser.add_argument("--qp-solver", choices=["piqp", "osqp", "qpoases", "highs"],
                             default="piqp",
                             help="QP solver plugin of casadi.conic")
+        parser.add_argument("--transcription", choices=["zoh", "euler", "radau", "radau-dense"],
+                            default="zoh",
+                            help="step rows: the exported dense StateSpace, or sparse implicit "
+                                 "steps of the continuous model (mpc_examples.sparse)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(message)s")
@@ -317,7 +321,8 @@ def run_example(kind: str, cls, argv=None):
         model = reduced_model(scn.tb, full, args.order) if args.order else full
         mpc = make_controller(cls, model, scn, args.step, N,
                               **({"transcription": args.transcription} if kind == "economic"
-                                 else {"solver": args.qp_solver}))
+                                 else {"solver": args.qp_solver,
+                                       "transcription": args.transcription}))
         label = f"{'economic NMPC' if kind == 'economic' else 'linear MPC'} ({mk} model)"
         if args.order:
             label = label[:-1] + f", {model.network.n_states} states)"

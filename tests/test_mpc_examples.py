@@ -168,8 +168,9 @@ def test_economic_warm_start_is_cheaper(small_model, hvac, comfort_zones):
     (LinearMPC, dict(horizon=2.5), "horizon"),
     (LinearMPC, dict(dt=0.0), "dt"),
     (LinearMPC, dict(comfort_zones=["nowhere"]), "comfort zones"),
+    (LinearMPC, dict(transcription="rk4"), "transcription must be one of"),
 ], ids=["transcription", "substeps", "horizon", "zone", "iterations", "lin-horizon", "dt",
-        "lin-zone"])
+        "lin-zone", "lin-transcription"])
 def test_bad_arguments(small_model, hvac, comfort_zones, cls, bad, match):
     kw = dict(comfort_zones=comfort_zones, dt=DT, horizon=4)
     kw.update(bad)
