@@ -147,7 +147,7 @@ def export(
                         kalman=None if kf is None else kf.arrays())
         kind = f"discrete, dt={dt:g} s" if dt else "continuous"
         console.print(f"wrote {statespace}: {sys.nstates} states, {sys.ninputs} inputs, "
-                      f"{sys.noutputs} outputs ({kind}); load with thermctl.io.load_statespace")
+                      f"{sys.noutputs} outputs ({kind}); load with thermctl.load_statespace")
     if casadi_path is not None:
         cm = model.to_casadi(substeps=substeps)
         x, u = ca.SX.sym("x", len(cm.state_names)), ca.SX.sym("u", len(cm.input_names))
