@@ -5,25 +5,26 @@ temperatures, and those temperatures are measured. So the building splits into
 independent **local problems** (local module identification in dynamic networks,
 Van den Hof et al., Automatica 2013; Ramaswamy & Van den Hof, IEEE TAC 2021):
 
-* the local model of measured zone ``i`` holds zone ``i``, every unmeasured zone it reaches
-  through walls or candidate air paths (an unmeasured hallway joins every local problem that
-  touches it: a latent node on a path between inputs and the output must be inside the
-  problem, not ignored), and every wall with an end among them; each measured node outside
-  (a neighbouring zone, the outdoor air) becomes a boundary node whose measured temperature
-  is an input;
+* the local model of measured zone ``i`` holds zone ``i``, the unmeasured zones it reaches
+  through walls or candidate air paths up to ``latent_depth`` hops (an unmeasured hallway
+  joins every local problem that touches it: a latent node on a path between inputs and the
+  output must be inside the problem, not ignored; one further away enters at a steady-state
+  proxy), and every wall with an end among them; each measured node outside (a neighbouring
+  zone, the outdoor air) becomes a boundary node whose measured temperature is an input;
 * the candidate air paths of problem ``i`` are its pairs with a known or estimable length
-  (``BuildingSpec.air_path_length``), to measured zones (a boundary node of the local
-  model) or to its unmeasured zones;
-* each problem selects its air paths by forward/backward BIC on its own Kalman likelihood
-  (:func:`thermctl.selection.select_air_paths`) and fits one R̄_v per air path.
+  (``BuildingSpec.air_path_length``) to measured zones (boundary nodes of the local model);
+* each problem selects its air paths by BIC on its own Kalman likelihood
+  (:func:`thermctl.selection.select_air_paths`): forward then backward from every candidate,
+  or backward from the paper's SIN on the zone's neighbourhood (:func:`propose_sin`), and
+  fits one R̄_v per air path.
 
 An air path between two measured zones is seen by both problems. :func:`combine` joins the
-two verdicts: ``sum`` (default) adds the two BIC changes — the log-likelihood of the whole
-building is, up to the neighbours' own noise, the sum of the zones' conditional
-log-likelihoods, so summed evidence is the composite-likelihood counterpart of the
-whole-building BIC (Varin, Reid & Firth, Statistica Sinica 2011); ``both`` and ``either``
-are the AND and OR rules of neighbourhood selection (Meinshausen & Bühlmann, Ann. Stat.
-2006). The combined R̄_v of an edge is the geometric mean of the ends that kept it.
+two verdicts: ``both`` (default) and ``either`` are the AND and OR rules of neighbourhood
+selection (Meinshausen & Bühlmann, Ann. Stat. 2006); ``sum`` adds the two BIC changes — the
+log-likelihood of the whole building is, up to the neighbours' own noise, the sum of the
+zones' conditional log-likelihoods, so summed evidence is the composite-likelihood
+counterpart of the whole-building BIC (Varin, Reid & Firth, Statistica Sinica 2011). The
+combined R̄_v of an edge is the geometric mean of the ends that kept it.
 
 Local problems are pure functions of (local spec, data columns, options) and run as
 tasks: serially, on local processes, or on a ``dask.distributed`` cluster
