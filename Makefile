@@ -11,7 +11,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[test,docs,brick,do-mpc,mpc]"
+	$(BIN)/python -m pip install --quiet -e ".[test,docs,brick,do-mpc]"
 	touch $(STAMP)
 
 demo: $(STAMP)
