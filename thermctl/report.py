@@ -139,7 +139,10 @@ def _figure(path: Path, caption: str) -> str:
             f"<figcaption>{_esc(caption)}</figcaption></figure>")
 
 
-def _fmt(v: float) -> str:
+def _fmt(v) -> str:
+    """A number, or per-path values (a model with one R̄_v, C_v per air path) in order."""
+    if isinstance(v, (list, tuple)):
+        return ", ".join(f"{x:.3g}" for x in v)
     return f"{v:.3g}"
 
 

@@ -44,8 +44,6 @@ class SelectionResult:
     time : float
         [s]
     n_fits : int
-    per_edge_estimator : LikelihoodEstimator or None
-        The per-edge fit of the selected structure (the search's last fit).
     """
 
     edges: list
@@ -57,7 +55,6 @@ class SelectionResult:
     per_edge: dict
     time: float
     n_fits: int
-    per_edge_estimator: object = None
 
     def summary(self) -> str:
         lines = [f"model-based edge selection ({self.criterion}): {len(self.edges)} edge(s) "
@@ -194,5 +191,4 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                          if per_edge else {}))
         scorer.n_fits += 1
     return SelectionResult([x.pair + (x.d,) for x in cur], cands, res.path, res.reasons,
-                           criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits,
-                           est if cur and criterion != "holdout" else None)
+                           criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits)
