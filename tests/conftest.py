@@ -179,3 +179,21 @@ def _reference_linear_system(net, rbar_v, c_v, ms=None):
 def reference_linear_system():
     """``f(net, rbar_v, c_v, ms=None) -> (A, Bt, cap)`` built by hand (see its docstring)."""
     return _reference_linear_system
+
+
+@pytest.fixture
+def docs_snippets(tmp_path, monkeypatch):
+    """``run(page)``: the ```python blocks of ``docs/<page>`` run in order, in one namespace,
+    in ``tmp_path``; returns the namespace."""
+    import re
+
+    def run(page):
+        text = (Path(__file__).resolve().parents[1] / "docs" / page).read_text()
+        blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+        assert blocks, f"docs/{page} has no python snippet"
+        monkeypatch.chdir(tmp_path)
+        ns: dict = {}
+        for code in blocks:
+            exec(compile(code, f"docs/{page}", "exec"), ns)
+        return ns
+    return run

@@ -250,22 +250,8 @@ def test_bad_column_maps(tmp_path, text, match):
         load_column_map(p)
 
 
-def run_docs_snippets(page, tmp_path, monkeypatch):
-    """Run the ```python blocks of a docs page in order, in one namespace, in tmp_path."""
-    import re
-    from pathlib import Path
-    text = (Path(__file__).resolve().parents[1] / "docs" / page).read_text()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    assert blocks, f"docs/{page} has no python snippet"
-    monkeypatch.chdir(tmp_path)
-    ns: dict = {}
-    for code in blocks:
-        exec(compile(code, f"docs/{page}", "exec"), ns)
-    return ns
-
-
-def test_docs_snippet_runs(tmp_path, monkeypatch):
-    ns = run_docs_snippets("brick.md", tmp_path, monkeypatch)
+def test_docs_snippet_runs(docs_snippets):
+    ns = docs_snippets("brick.md")
     assert ns["imp"].columns["PUGH.2F.R240.VAV.SA-F"] == "ms:r240"
 
 

@@ -167,22 +167,8 @@ def test_errors(pugh, monkeypatch):
         to_do_mpc(model)
 
 
-def run_docs_snippets(page, tmp_path, monkeypatch):
-    """Run the ```python blocks of a docs page in order, in one namespace, in tmp_path."""
-    import re
-    from pathlib import Path
-    text = (Path(__file__).resolve().parents[1] / "docs" / page).read_text()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    assert blocks, f"docs/{page} has no python snippet"
-    monkeypatch.chdir(tmp_path)
-    ns: dict = {}
-    for code in blocks:
-        exec(compile(code, f"docs/{page}", "exec"), ns)
-    return ns
-
-
-def test_docs_snippet_runs(tmp_path, monkeypatch):
+def test_docs_snippet_runs(docs_snippets):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)    # do-mpc's numpy notice
-        ns = run_docs_snippets("do-mpc.md", tmp_path, monkeypatch)
+        ns = docs_snippets("do-mpc.md")
     assert ns["x"][:6].min() > 21.0 - 0.01

@@ -117,20 +117,6 @@ def test_load_statespace_prints_its_operating_point(tmp_path, pugh):
                                rtol=1e-7)
 
 
-def run_docs_snippets(page, tmp_path, monkeypatch):
-    """Run the ```python blocks of a docs page in order, in one namespace, in tmp_path."""
-    import re
-    from pathlib import Path
-    text = (Path(__file__).resolve().parents[1] / "docs" / page).read_text()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    assert blocks, f"docs/{page} has no python snippet"
-    monkeypatch.chdir(tmp_path)
-    ns: dict = {}
-    for code in blocks:
-        exec(compile(code, f"docs/{page}", "exec"), ns)
-    return ns
-
-
-def test_docs_snippet_runs(tmp_path, monkeypatch):
-    ns = run_docs_snippets("python-control.md", tmp_path, monkeypatch)
+def test_docs_snippet_runs(docs_snippets, tmp_path):
+    ns = docs_snippets("python-control.md")
     assert (tmp_path / "ss.npz").is_file() and ns["loaded"].nstates == 55
