@@ -303,3 +303,21 @@ def test_propose_sin_unites_both_ends_and_falls_back_on_few_days(corridor):
     # and far fewer pairs than the candidates: the searches start small
     assert sum(len(p.proposed) for p in prop) < 0.6 * sum(len(p.candidates) for p in prop)
     assert all(0.0 <= v <= 1.0 for sc in scores.values() for v in sc.values())
+
+
+def test_sin_picks_take_the_threshold_and_the_best_partner(monkeypatch):
+    """z's pairs scoring at least s_min, and z's best partner, are picked; a neighbour's own
+    best pair is not (it is that neighbour's problem to propose it)."""
+    import thermctl.structure.neighbourhood as nb
+    from thermctl.local import _sin_picks
+    spec = _chain_spec()
+    p = local_problems(spec, zones=["A"], latent_depth=None)[0]
+    p = LocalProblem(p.zone, p.spec, (("A", "B", 5.0), ("A", "C", 3.0), ("A", "D", 4.0)),
+                     p.columns)
+    monkeypatch.setattr(nb, "neighbourhood_scores",
+                        lambda frame, z, order, **kw: {"B": 0.6, "C": 0.1, "D": 0.0})
+    scores, picked = _sin_picks(p, None, 0.05, 0.25)
+    assert picked == {"air:A-B"}
+    monkeypatch.setattr(nb, "neighbourhood_scores",
+                        lambda frame, z, order, **kw: {"B": 0.05, "C": 0.1, "D": 0.0})
+    assert _sin_picks(p, None, 0.05, 0.25)[1] == {"air:A-C"}     # the best partner only

@@ -483,7 +483,6 @@ def _sin_picks(problem, frame, level, s_min):
     """``(scores by air-path name, names picked)`` by SIN on the problem's neighbourhood,
     or ``None`` when SIN cannot run (too few days)."""
     from .structure.neighbourhood import neighbourhood_scores
-    from .structure.selection import select_edges as rule_edges
     z = problem.zone
     other = {(b if a == z else a): (a, b, d) for a, b, d in problem.candidates}
     if not other:
@@ -497,9 +496,10 @@ def _sin_picks(problem, frame, level, s_min):
         return None
     pairs = {tuple(sorted(other[n][:2])): sc for n, sc in scores.items()}
     dist = {tuple(sorted(other[n][:2])): other[n][2] for n in scores}
-    # the paper's rule for this zone (its best partner, if it scores at all) ∪ threshold;
-    # rule_edges' "paper" would also give every neighbour its best pair, here always z's
-    picked = {(e.a, e.b) for e in rule_edges(pairs, dist, [z], "threshold", s_min)}
+    # the paper's rule for this zone (its best partner, if it scores at all) ∪ the threshold
+    # rule, both on z's pairs only (structure.selection's rules would give every neighbour
+    # its best pair too, and count per zone over the whole building)
+    picked = {p for p, v in pairs.items() if v >= s_min and v > 0}
     best = min(pairs, key=lambda p: (-pairs[p], dist[p], p), default=None)
     if best is not None and pairs[best] > 0:
         picked.add(best)
