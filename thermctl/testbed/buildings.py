@@ -125,6 +125,24 @@ def _hall_capacitance(volume, cp):
     return HALL_MULTIPLIER * RHO_AIR * cp * volume
 
 
+def _pick_edges(rng, offices, cand, p_edge, max_edge):
+    """Open-door pairs ``(a, b, d)``, sorted: each office in at most one, a partner within
+    ``max_edge`` [m] drawn with probability ∝ 1/d, an office tried with probability ``p_edge``."""
+    free, edges = set(offices), []
+    for a in rng.permutation(offices):
+        if a not in free or rng.random() >= p_edge:
+            continue
+        opts = [(b if x == a else x, d) for x, b, d in cand
+                if a in (x, b) and d <= max_edge and (b if x == a else x) in free]
+        if not opts:
+            continue
+        w = np.array([1.0 / d for _, d in opts])
+        b, d = opts[rng.choice(len(opts), p=w / w.sum())]
+        free -= {a, b}
+        edges.append((*sorted((str(a), str(b))), d))
+    return sorted(edges)
+
+
 def pugh_hall_layout() -> Layout:
     """The :func:`pugh_hall_spec` building with floor areas and zone kinds (no sun: north walls)."""
     height, hall_w, floor_h = 3.0, 2.0, 3.6
@@ -275,18 +293,7 @@ def corridor_layout(n_per_side: int, floors: int = 1, seed: int = 0, *, office_w
                     cand.append((a, b, d))
         # Open-door pairs: each office joins at most one air path; partners within
         # max_edge_distance, nearer ones likelier.
-        free = set(offices)
-        for a in rng.permutation(offices):
-            if a not in free or rng.random() >= p_edge:
-                continue
-            opts = [(b if x == a else x, d) for x, b, d in cand
-                    if a in (x, b) and d <= max_edge_distance and (b if x == a else x) in free]
-            if not opts:
-                continue
-            w = np.array([1.0 / d for _, d in opts])
-            b, d = opts[rng.choice(len(opts), p=w / w.sum())]
-            free -= {a, b}
-            edges.append((*sorted((str(a), str(b))), d))
+        edges += _pick_edges(rng, offices, cand, p_edge, max_edge_distance)
     spec = spec_from_dict({
         "name": f"corridor-{floors}x{n}x2",
         "capacity_multiplier": CAPACITY_MULTIPLIER,

@@ -35,7 +35,8 @@ import numpy as np
 
 from ..errors import SpecError
 from ..spec import cp_moist_air, spec_from_dict
-from .buildings import CAPACITY_MULTIPLIER, SHGC_EFFECTIVE, WALL_TYPES, Layout, _hall_capacitance
+from .buildings import (CAPACITY_MULTIPLIER, SHGC_EFFECTIVE, WALL_TYPES, Layout, _hall_capacitance,
+                        _pick_edges)
 
 __all__ = ["ring_layout", "l_shape_layout", "open_plan_layout", "add_floor_above",
            "random_walls", "hide_offices", "WALL_RANGES", "RESISTANCE_SPLIT", "CORE_KINDS"]
@@ -104,23 +105,6 @@ class _Floor:
         return spec_from_dict({"name": name, "capacity_multiplier": CAPACITY_MULTIPLIER,
                                "zones": self.zones, "boundary": boundary, "walls": self.walls,
                                "distances": distances}, source=name)
-
-
-def _pick_edges(rng, offices, cand, p_edge, max_edge):
-    """Open-door pairs: each office in at most one, nearer partners likelier (as the corridor)."""
-    free, edges = set(offices), []
-    for a in rng.permutation(offices):
-        if a not in free or rng.random() >= p_edge:
-            continue
-        opts = [(b if x == a else x, d) for x, b, d in cand
-                if a in (x, b) and d <= max_edge and (b if x == a else x) in free]
-        if not opts:
-            continue
-        w = np.array([1.0 / d for _, d in opts])
-        b, d = opts[rng.choice(len(opts), p=w / w.sum())]
-        free -= {a, b}
-        edges.append((*sorted((str(a), str(b))), d))
-    return sorted(edges)
 
 
 def _candidates(spec_walls, doors, path, max_distance):
