@@ -30,8 +30,8 @@ import pandas as pd
 
 from thermctl.model import ThermalModel, zoh
 
-__all__ = ["identified_model", "controller_model", "reduced_model", "GainKalmanFilter",
-           "logged_steps"]
+__all__ = ["identified_model", "controller_model", "reduced_model", "min_flow_point",
+           "GainKalmanFilter", "logged_steps"]
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +114,17 @@ def controller_model(tb, kind: str = "identified", end=None) -> ThermalModel:
     raise ValueError(f"model kind must be one of {MODEL_KINDS}, found {kind!r}")
 
 
+def min_flow_point(tb, model: ThermalModel):
+    """The operating point reductions are made at: every box at its minimum flow [kg/s],
+    supply at the AHU temperature [°C], boundary nodes at their mean over the data [°C]."""
+    boxes = tb.truth.details["vav_boxes"]
+    net = model.network
+    ms = {z: boxes[z]["ms_min"] for z in net.zones if z in boxes}
+    Tb = tb.data[[f"T:{b}" for b in net.boundary]].mean().to_numpy()
+    return model.operating_point(ms=ms, Ts=float(tb.controller.settings.T_ahu),
+                                 T=dict(zip(net.boundary, Tb)))
+
+
 def reduced_model(tb, model: ThermalModel, order: int):
     """``model`` reduced to ``order`` states by :func:`thermctl.reduce.structured`.
 
@@ -128,14 +139,10 @@ def reduced_model(tb, model: ThermalModel, order: int):
     """
     from thermctl.reduce import structured
 
-    boxes = tb.truth.details["vav_boxes"]
-    net = model.network
-    ms = {z: boxes[z]["ms_min"] for z in net.zones if z in boxes}
-    Tb = tb.data[[f"T:{b}" for b in net.boundary]].mean().to_numpy()
-    op = model.operating_point(ms=ms, Ts=float(tb.controller.settings.T_ahu),
-                               T=dict(zip(net.boundary, Tb)))
+    op = min_flow_point(tb, model)
     red = structured(model, op, order=int(order), design_ms=[0.0])
-    log.info("reduced the model from %d to %d states", net.n_states, red.network.n_states)
+    log.info("reduced the model from %d to %d states", model.network.n_states,
+             red.network.n_states)
     return red.network
 
 

@@ -42,6 +42,7 @@ import pandas as pd
 from .common import format_table
 from .economic_mpc import EconomicMPC
 from .linear_mpc import LinearMPC
+from .model import min_flow_point
 from .simulator import make_scenario
 from .sparse import eliminate_fast_edges
 
@@ -84,12 +85,8 @@ def _models(scn, per_zone, log_errors):
     """``[(name, model, to_model_state, info)]`` for the full and reduced models."""
     tb = scn.tb
     full = tb.model
-    boxes = tb.truth.details["vav_boxes"]
     net = full.network
-    ms = {z: boxes[z]["ms_min"] for z in net.zones if z in boxes}
-    Tb = tb.data[[f"T:{b}" for b in net.boundary]].mean().to_numpy()
-    op = full.operating_point(ms=ms, Ts=float(tb.controller.settings.T_ahu),
-                              T=dict(zip(net.boundary, Tb)))
+    op = min_flow_point(tb, full)
     out = [("full", full, lambda x: x, {})]
     rnet, info = eliminate_fast_edges(full, op)
     out.append(("no-conv", rnet, rnet.from_full_state, info))
