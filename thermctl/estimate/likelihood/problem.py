@@ -637,6 +637,31 @@ class LikelihoodProblem:
             G[r] = np.asarray(self._hess["weighted"](eta, w), dtype=float).ravel()
         return G
 
+    def block_nll(self, eta, block: float = 86400.0) -> tuple[np.ndarray, np.ndarray]:
+        """The likelihood's contributions of consecutive time blocks.
+
+        Parameters
+        ----------
+        eta : array_like
+        block : float
+            Block length [s] (blocks follow the data rows from the first sample).
+
+        Returns
+        -------
+        ids : ndarray of int
+            Block numbers (row // rows per block) that hold observations.
+        nll : ndarray
+            ``nll_b`` of those blocks [-]; they sum to :meth:`nll`.
+        """
+        if "col_terms" not in self._hess:
+            self._hess["col_terms"] = ca.Function("col_terms", [self._eta], [self._col_terms])
+        cols = np.asarray(self._hess["col_terms"](np.asarray(eta, float)), dtype=float).ravel()
+        per = max(1, int(round(block / self.data.dt)))
+        keep = (self.tmap >= 0) & (self.mask > 0)
+        bid = self.tmap[keep] // per
+        ids, inv = np.unique(bid, return_inverse=True)
+        return ids, np.bincount(inv, weights=cols[keep], minlength=len(ids))
+
     def matrices(self, eta) -> dict:
         """Every intermediate matrix at ``eta`` as numpy arrays (continuous, discrete, filter)."""
         out = self.matrices_fn(eta=np.asarray(eta, float))
