@@ -154,6 +154,20 @@ class ConvectionParameters:
         """The air-path name in a parameter name (``None`` for a shared parameter)."""
         return key[key.index("[") + 1:-1] if "[" in key and key.endswith("]") else None
 
+    @staticmethod
+    def kind_of(key: str) -> str:
+        """The kind a parameter name spells (``rbar_v`` for ``rbar_v`` and ``rbar_v[air:a-b]``;
+        the stem of any other name, e.g. ``sigma_q``)."""
+        return key.split("[", 1)[0]
+
+    @classmethod
+    def is_rbar(cls, key: str, per_edge: bool | None = None) -> bool:
+        """Whether ``key`` names an R̄_v: shared or per edge (``per_edge=None``), only per
+        edge (``True``) or only the shared one (``False``)."""
+        if cls.kind_of(key) != "rbar_v":
+            return False
+        return per_edge is None or (cls.edge_of(key) is not None) == per_edge
+
     @classmethod
     def from_tau0(cls, edges, rbar_v, tau0) -> "ConvectionParameters":
         """From ``R̄_v`` [K/(W m)] and ``τ0`` [s/m] (scalars or one per edge)."""

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import BoundWarning, EstimationError
+from .model import ConvectionParameters
 from .estimate.likelihood import LikelihoodEstimator
 from .estimate.likelihood.scoring import CRITERIA, LikelihoodScorer
 from .network import ThermalNetwork
@@ -186,7 +187,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
             final.fit(data, init={k: v for k, v in est.params_.items()
-                                  if not k.startswith("rbar_v[")}
+                                  if not ConvectionParameters.is_rbar(k, per_edge=True)}
                       | ({"rbar_v": float(np.exp(np.mean(np.log(list(per_edge.values())))))}
                          if per_edge else {}))
         scorer.n_fits += 1

@@ -29,6 +29,7 @@ from scipy.stats import chi2, norm
 
 from ..._blas import single_thread_blas
 from ...errors import ConvergenceWarning, EstimationError
+from ...model import ConvectionParameters
 from .optimize import minimize_criterion
 
 __all__ = ["ParameterInterval", "IdentifiabilityReport", "hessian_fd", "wald_intervals",
@@ -370,7 +371,7 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
     verdicts = {}
     for n in names:
         verdicts[n] = _verdict(intervals[n], pb)
-    if "tau0" in names and any(k.startswith("rbar_v") for k in names):
+    if "tau0" in names and any(ConvectionParameters.is_rbar(k) for k in names):
         verdicts["c_v"] = _cv_verdict(intervals["tau0"], estimator)
     return IdentifiabilityReport(intervals, wald, weak, verdicts, level)
 
@@ -380,9 +381,10 @@ def _fmt(x):
 
 
 def _verdict(iv: ParameterInterval, pb) -> str:
-    what = {"rbar_v": "R̄_v", "tau0": "τ0 = R̄_v·C_v"}.get(iv.name.split("[")[0], iv.name)
-    if iv.name.startswith("rbar_v["):
-        what = "R̄_v of " + iv.name[len("rbar_v["):-1]
+    what = {"rbar_v": "R̄_v", "tau0": "τ0 = R̄_v·C_v"}.get(ConvectionParameters.kind_of(iv.name),
+                                                          iv.name)
+    if ConvectionParameters.is_rbar(iv.name, per_edge=True):
+        what = "R̄_v of " + ConvectionParameters.edge_of(iv.name)
     span = f"[{_fmt(iv.lower)}, {_fmt(iv.upper)}] {iv.unit}"
     how = iv.method + (f", widened ×{math.sqrt(iv.inflation):.1f} for non-white innovations"
                        if iv.inflation > 1.05 else "")
