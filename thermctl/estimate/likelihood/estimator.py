@@ -18,9 +18,10 @@ import numpy as np
 
 from ..._blas import single_thread_blas
 from ...errors import BoundWarning, DataError, EstimationError
-from ...model import RBAR_V_PAPER
+from ...model import RBAR_V_PAPER, ConvectionParameters
 from ...network import ThermalNetwork
 from ..data import EstimationData, as_estimation_data
+from ..result import FitResult
 from .optimize import CRITERIA, minimize_criterion
 from .problem import LikelihoodOptions, LikelihoodProblem
 
@@ -29,8 +30,8 @@ __all__ = ["LikelihoodEstimator", "LikelihoodResult"]
 log = logging.getLogger(__name__)
 
 @dataclass
-class LikelihoodResult:
-    """What a grey-box fit found.
+class LikelihoodResult(FitResult):
+    """What a grey-box fit found (a :class:`~thermctl.estimate.FitResult`).
 
     Attributes
     ----------
@@ -78,6 +79,16 @@ class LikelihoodResult:
     starts: list = field(default_factory=list)
     rows: str = "all"
 
+    @property
+    def param_names(self) -> list:
+        """Names of every estimated parameter, noise parameters included."""
+        return list(self.params)
+
+    @property
+    def param_values(self) -> dict:
+        """``{name: value}`` of every estimated parameter (:attr:`params`)."""
+        return dict(self.params)
+
     def summary(self) -> str:
         lines = [f"grey-box fit ({self.criterion}): value {self.value:.6g}, "
                  f"{self.n_free} free parameters, {self.n_obs} observations ({self.rows}), "
@@ -86,7 +97,7 @@ class LikelihoodResult:
         for e, r, c in zip(self.edges, self.rbar_v, self.c_v):
             lines.append(f"  {e}: rbar_v = {r:.4g} K/(W m), c_v = {c:.4g} J/K")
         for k, v in self.params.items():
-            if not k.startswith(("rbar_v", "tau0")):
+            if ConvectionParameters.kind_of(k) not in ("rbar_v", "tau0"):
                 lines.append(f"  {k} = {v:.4g}")
         if np.isfinite(self.aic):
             lines.append(f"  AIC {self.aic:.2f}, BIC {self.bic:.2f}")

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..result import FitResult
+
 __all__ = ["GridResult", "EstimationResult", "ProfileReport", "ParameterProfile"]
 
 
@@ -22,7 +24,9 @@ class GridResult:
     J : ndarray, shape (n_tau, n_rbar)
         The cost at every point [K²].
     best_rbar_v, best_c_v, best_tau0, best_J : float
-        The grid's minimiser and its cost ([K/(W m)], [J/K], [s/m], [K²]).
+        The grid's minimiser and its cost ([K/(W m)], [J/K], [s/m], [K²]). Points are
+        ranked by what the NLPs minimise, ``J + x0_weight·Σδ²``, which is J itself unless
+        the initial states are estimated.
     best_index : (int, int)
         ``(i_tau, i_rbar)`` of the minimum.
     active_bounds : list of str
@@ -140,8 +144,8 @@ class ProfileReport:
 
 
 @dataclass
-class EstimationResult:
-    """A fitted (rbar_v, c_v) and how it was found.
+class EstimationResult(FitResult):
+    """A fitted (rbar_v, c_v) and how it was found (a :class:`~thermctl.estimate.FitResult`).
 
     Attributes
     ----------
@@ -218,8 +222,9 @@ class EstimationResult:
         return dict(zip(self.param_names, list(r) + [self.c_v]))
 
     @property
-    def on_bound(self) -> bool:
-        return bool(self.active_bounds)
+    def param_values(self) -> dict:
+        """``{name: value}`` of the estimated parameters (:attr:`theta`)."""
+        return self.theta
 
     def summary(self) -> str:
         th = ", ".join(f"{k} = {v:.4g}" for k, v in self.theta.items())
