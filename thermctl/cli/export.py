@@ -7,8 +7,6 @@ import json
 import re
 from pathlib import Path
 
-import casadi as ca
-import numpy as np
 import typer
 from rich.markup import escape
 
@@ -149,24 +147,10 @@ def export(
         console.print(f"wrote {statespace}: {sys.nstates} states, {sys.ninputs} inputs, "
                       f"{sys.noutputs} outputs ({kind}); load with thermctl.load_statespace")
     if casadi_path is not None:
-        cm = model.to_casadi(substeps=substeps)
-        x, u = ca.SX.sym("x", len(cm.state_names)), ca.SX.sym("u", len(cm.input_names))
-        f = ca.Function("f", [x, u], [cm.f(x, u, cm.p_value)], ["x", "u"], ["xdot"])
-        xm, um, dtm = ca.MX.sym("x", x.numel()), ca.MX.sym("u", u.numel()), ca.MX.sym("dt")
-        F = ca.Function("F", [xm, um, dtm], [cm.F(xm, um, cm.p_value, dtm)], ["x", "u", "dt"], ["x_next"])
+        f, F, doc = ex.casadi_functions(model, substeps, info=info, dist=dist, kf=kf)
         casadi_path.parent.mkdir(parents=True, exist_ok=True)
         f.save(str(casadi_path))
         F.save(str(casadi_path) + ".step")
-        doc = {"states": cm.state_names, "inputs": cm.input_names, "parameters": cm.param_names,
-               "p": cm.p_value.tolist(), "substeps": substeps,
-               "signature": "f(x, u) -> xdot and F(x, u, dt) -> x_next, p built in; "
-                            "ThermalModel.to_casadi() gives f(x, u, p), F(x, u, p, dt)",
-               **info, "E": dist.E.tolist()}
-        if kf is not None:
-            doc["noise"] = {"states": kf.states, "Qc_diag": np.diag(kf.Qc).tolist(),
-                            "R_diag": np.diag(kf.R).tolist(), "params": kf.params,
-                            "meaning": "augmented state x, then d[z] (heat gain [W], random "
-                                       "walk, dT[z]/dt += d[z]/C_z); Qc continuous intensity"}
         atomic_write_text(str(casadi_path) + ".json", json.dumps(doc, indent=2))
         console.print(f"wrote {casadi_path} (f(x,u)), {casadi_path}.step (F(x,u,dt)) and "
                       f"{casadi_path}.json; load with casadi.Function.load")
