@@ -38,11 +38,11 @@ def _warm_start(problem, shape, progress):
                             np.log((T / R).ravel() / problem.theta_ref[-1])])
     if progress:
         progress("warm start", 0, len(etas))
-    J = problem.simulator.cost_batch(etas)
+    _, obj = problem.simulator.cost_batch(etas, objective=True)
     if progress:
         progress("warm start", len(etas), len(etas))
-    k = int(np.nanargmin(J))
-    return etas[k], float(J[k])
+    k = int(np.nanargmin(obj))
+    return etas[k], float(obj[k])
 
 
 def fit(problem: CostProblem, method: str = "multiple_shooting", *, theta0=None,
@@ -149,6 +149,17 @@ def _fit(problem, method, theta0, warm_start, interval, substeps, ipopt_options,
     ev = sim.cost(eta)            # the grid's J at the estimate (raises if not finite)
     success = sol["success"] and np.isfinite(ev.J)
     message = "" if success else f"IPOPT did not converge: {sol['status']}"
+    ev0 = sim.cost(eta0)
+    if ev.objective > ev0.objective * (1.0 + 1e-9):
+        # IPOPT may stop (acceptable level, iteration limit, an infeasible shooting node
+        # within its constraint tolerance) at a point whose exact objective exceeds the
+        # start's: never hand back worse than the start
+        log.warning("%s ended at objective %.6g above its start's %.6g (%s); the start is "
+                    "returned", method, ev.objective, ev0.objective, sol["status"])
+        message = (message + "; " if message else "") + (
+            f"IPOPT ended above its start (objective {ev.objective:.6g} > "
+            f"{ev0.objective:.6g}): the start is returned")
+        eta, ev = eta0, ev0
     if method == "casadi_radau" and ev.J > 0:
         gap = abs(sol["J"] - ev.J) / ev.J
         if gap > 1e-2:

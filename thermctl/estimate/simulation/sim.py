@@ -183,9 +183,12 @@ class Simulator:
         """Per-point data for :meth:`cost_batch` (none for the generic loop)."""
         return None
 
-    def cost_batch(self, etas, prepared=None) -> np.ndarray:
-        """J at each row of ``etas`` (a loop over :meth:`cost`)."""
-        return np.array([self.cost(e).J for e in np.atleast_2d(np.asarray(etas, dtype=float))])
+    def cost_batch(self, etas, prepared=None, objective: bool = False):
+        """J at each row of ``etas`` (a loop over :meth:`cost`); with ``objective`` also
+        ``J + x0_weight·Σδ²``, what the NLPs minimise."""
+        evs = [self.cost(e) for e in np.atleast_2d(np.asarray(etas, dtype=float))]
+        J = np.array([ev.J for ev in evs])
+        return (J, np.array([ev.objective for ev in evs])) if objective else J
 
     def trajectory(self, eta, x0=None) -> np.ndarray:
         """All states at every simulated sample, shape (n_steps + 1, n_states) [°C]."""
@@ -376,7 +379,7 @@ class ExactSimulator(Simulator):
         self.n_sim += len(etas)   # counted here: cost_batch may run on worker threads
         return np.stack(cs), np.stack(S0s)
 
-    def cost_batch(self, etas, prepared=None) -> np.ndarray:
+    def cost_batch(self, etas, prepared=None, objective: bool = False):
         """J at each row of ``etas`` (shape (G, n_eta)), vectorised over the points.
 
         Parameters
@@ -384,11 +387,16 @@ class ExactSimulator(Simulator):
         etas : array_like, shape (G, n_eta)
         prepared : tuple, optional
             ``prepare(etas)``, if already computed.
+        objective : bool
+            Also return ``J + x0_weight·Σδ²``.
 
         Returns
         -------
         J : ndarray, shape (G,)
-            [K²]; for free initial states the minimum over them.
+            [K²]; for free initial states at the ridge estimate of them.
+        obj : ndarray, shape (G,)
+            ``J + x0_weight·Σδ²`` [K²] (only with ``objective``): what the NLPs minimise,
+            so what a grid must rank by to give them a start they cannot end above.
         """
         pb = self.problem
         c, S0 = self.prepare(etas) if prepared is None else prepared   # (G, n), (G, n, n)
@@ -433,15 +441,19 @@ class ExactSimulator(Simulator):
         mask = pb.mask
         Y = np.where(mask, pb.Y_obs, 0.0)
         J = np.empty(G)
+        obj = np.empty(G)
         for g in range(G):
             e0 = (out[g] - Y)[mask]
+            pen = 0.0
             if nf:
                 H = outS[g][mask]
                 d = _ridge_lstsq(H, -e0, pb.x0_weight)
                 e0 = e0 + H @ d
+                pen = pb.x0_weight * float(d @ d)
             with np.errstate(over="ignore", invalid="ignore"):   # checked by the caller
                 J[g] = float(e0 @ e0)
-        return J
+            obj[g] = J[g] + pen
+        return (J, obj) if objective else J
 
     def trajectory(self, eta, x0=None) -> np.ndarray:
         """All states at every simulated sample, shape (n_steps + 1, n_states) [°C]."""
