@@ -27,7 +27,11 @@ import logging
 
 import numpy as np
 import pandas as pd
+import scipy.sparse as sp
 
+from thermctl.estimate.likelihood.kalman import filter_predict, filter_update, process_noise_np
+from thermctl.export.disturbances import greybox_params
+from thermctl.export.kalman import augment_noise, has_noise_model
 from thermctl.model import ThermalModel, zoh
 
 __all__ = ["identified_model", "controller_model", "reduced_model", "min_flow_point",
@@ -149,56 +153,77 @@ def reduced_model(tb, model: ThermalModel, order: int):
 class GainKalmanFilter:
     r"""Kalman filter for the model state and an unknown heat gain per measured zone.
 
-    Augmented state :math:`z = [x;\, d]`, exact ZOH over the plant step with the applied
-    supply held (the model is linear in :math:`x` once :math:`\dot m` is fixed):
+    Augmented state :math:`z = [x;\, d\,(;\, e)]`, exact ZOH over the plant step with the
+    applied supply held (the model is linear in :math:`x` once :math:`\dot m` is fixed):
 
     .. math::
 
         x_{k+1} = \Phi(\dot m_k) x_k + \Gamma(\dot m_k)\,(b(u_k) + E d_k), \quad
-        d_{k+1} = d_k + w_k, \quad y_k = H x_k + v_k,
+        d_{k+1} = d_k + w_k, \quad y_k = H x_k (+ e_k) + v_k,
 
     :math:`E` puts gain :math:`d_j` [W] into its zone row divided by the zone capacitance.
 
+    The noise model is the identified one when the model has one (a
+    :class:`~thermctl.model.ThermalModel` identified with the likelihood criterion:
+    ``model.meta["greybox"]["params"]``, what :func:`thermctl.export.kalman_filter`
+    exports), built by the same :func:`thermctl.export.kalman.augment_noise`; otherwise
+    (the true, conduction-only and reduced models, or any ``sd_*`` given) the hand-set one
+    below. The numerics are those of :mod:`thermctl.estimate.likelihood.kalman`
+    (:func:`~thermctl.estimate.likelihood.kalman.process_noise_np`,
+    :func:`~thermctl.estimate.likelihood.kalman.filter_predict`,
+    :func:`~thermctl.estimate.likelihood.kalman.filter_update`). Only the transition is
+    this class's own: the exported filter is linearized at one operating point, while the
+    supply flow changes the state matrix at every MPC step, so :math:`\Phi`, :math:`\Gamma`
+    and :math:`Q_d` are recomputed whenever the applied flows change.
+
     Parameters
     ----------
-    model : ThermalModel
+    model : ThermalModel or ReducedNetwork
         The controller model.
     dt : float
         Plant (measurement) step [s].
     measured : list of str
         Zones whose temperatures are measured (they also get a gain state).
-    sd_zone : float
-        Process noise of zone temperatures per hour [K/√h]: model error.
-    sd_edge : float
-        Process noise of edge (wall, air-path) states per hour [K/√h].
-    sd_gain : float
-        Random-walk intensity of the gains [W/√h]: how fast occupancy can change.
-    sd_meas : float
-        Sensor noise [K].
+    sd_zone : float, optional
+        Hand-set process noise of zone temperatures [K/√h]: model error (default 0.3).
+    sd_edge : float, optional
+        Hand-set process noise of edge (wall, air-path) states [K/√h] (default 0.05).
+    sd_gain : float, optional
+        Hand-set random-walk intensity of the gains [W/√h]: how fast occupancy can change
+        (default 150).
+    sd_meas : float, optional
+        Hand-set sensor noise [K] (default 0.1).
     """
 
-    def __init__(self, model: ThermalModel, dt: float, measured, sd_zone: float = 0.3,
-                 sd_edge: float = 0.05, sd_gain: float = 150.0, sd_meas: float = 0.1):
+    HAND_SET = {"sd_zone": 0.3, "sd_edge": 0.05, "sd_gain": 150.0, "sd_meas": 0.1}
+
+    def __init__(self, model: ThermalModel, dt: float, measured, sd_zone: float | None = None,
+                 sd_edge: float | None = None, sd_gain: float | None = None,
+                 sd_meas: float | None = None):
         net = model.network
         self.model = model
         self.dt = float(dt)
         self.nx, self.nz = net.n_states, net.n_zones
+        measured = list(measured)
         self.meas_idx = np.array([net.zones.index(z) for z in measured], dtype=int)
-        nm = len(self.meas_idx)
-        self.n = self.nx + nm
         self._mats = model.matrices()
-        cap = model.capacitances()
-        self._E = np.zeros((self.nx, nm))
-        self._E[self.meas_idx, np.arange(nm)] = 1.0 / cap[self.meas_idx]
-        h = self.dt / 3600.0
-        q = np.full(self.nx, sd_edge ** 2 * h)
-        q[: self.nz] = sd_zone ** 2 * h
-        self.Qn = np.diag(np.concatenate([q, np.full(nm, sd_gain ** 2 * h)]))
-        self.R = np.eye(nm) * sd_meas ** 2
-        self.H = np.zeros((nm, self.n))
-        self.H[np.arange(nm), self.meas_idx] = 1.0
+        cz = np.asarray(model.capacitances(), float)[: self.nz]
+        given = {k: v for k, v in dict(sd_zone=sd_zone, sd_edge=sd_edge, sd_gain=sd_gain,
+                                       sd_meas=sd_meas).items() if v is not None}
+        params = greybox_params(model) if hasattr(model, "meta") and not given else {}
+        self.identified = has_noise_model(params)
+        if not self.identified:
+            params, edge_q = _hand_set_noise(cz, net.zones, measured, **{**self.HAND_SET, **given})
+        # the network block of A is replaced at every flow (_transition); only the
+        # augmentation (gain and sensor-error states, noise) is taken from here
+        self._A, self.H, self.Qc, self.R, extra = augment_noise(
+            params, np.zeros((self.nx, self.nx)), cz, net.zones, measured)
+        if not self.identified:
+            self.Qc[self.nz:self.nx, self.nz:self.nx] += np.eye(self.nx - self.nz) * edge_q
+        self.n = self._A.shape[0]
+        self.nd = sum(n.startswith("d[") for n in extra)
         self._cache_key = None
-        self._PhiGam = None
+        self._trans = None
         self.z = None
         self.P = None
 
@@ -210,13 +235,15 @@ class GainKalmanFilter:
 
     @property
     def gains(self) -> np.ndarray:
-        """Estimated heat gain per measured zone [W]."""
-        return self.z[self.nx:].copy()
+        """Estimated heat gain per measured zone [W] (0 if the noise model has no gains)."""
+        if not self.nd:
+            return np.zeros(len(self.meas_idx))
+        return self.z[self.nx:self.nx + self.nd].copy()
 
     def gains_all_zones(self) -> np.ndarray:
         """Estimated gains on all zones [W] (0 for unmeasured zones)."""
         g = np.zeros(self.nz)
-        g[self.meas_idx] = self.z[self.nx:]
+        g[self.meas_idx] = self.gains
         return g
 
     def reset(self, T_meas, T_boundary, gains=None) -> None:
@@ -234,12 +261,17 @@ class GainKalmanFilter:
         Tz = np.full(self.nz, np.nan)
         Tz[self.meas_idx] = T_meas
         x0 = self.model.initial_state(Tz, T_boundary)
-        nm = len(self.meas_idx)
-        d0 = np.zeros(nm) if gains is None else np.asarray(gains, float)
-        self.z = np.concatenate([x0, d0])
-        p0 = np.full(self.nx, 1.0)
+        z0 = np.zeros(self.n)
+        z0[: self.nx] = x0
+        if self.nd and gains is not None:
+            z0[self.nx:self.nx + self.nd] = np.asarray(gains, float)
+        self.z = z0
+        p0 = np.full(self.n, 1.0)
         p0[self.meas_idx] = 0.1
-        self.P = np.diag(np.concatenate([p0 ** 2, np.full(nm, 200.0 ** 2)]))
+        p0[self.nx:self.nx + self.nd] = 200.0       # [W]: nothing is known of the gains
+        e = np.arange(self.nx + self.nd, self.n)    # AR(1) sensor errors: their stationary sd
+        p0[e] = np.sqrt(self.Qc[e, e] / (-2.0 * self._A[e, e]))
+        self.P = np.diag(p0 ** 2)
 
     # ---- filter ------------------------------------------------------------
     def _transition(self, u):
@@ -247,13 +279,12 @@ class GainKalmanFilter:
         key = tuple(np.round(u[sl["ms"]], 12))
         if key != self._cache_key:
             A_u, _ = self.model.affine(u, mats=self._mats)
-            Phi, Gam = zoh(A_u, self.dt)
-            F = np.zeros((self.n, self.n))
-            F[: self.nx, : self.nx] = Phi
-            F[: self.nx, self.nx:] = Gam @ self._E
-            F[self.nx:, self.nx:] = np.eye(self.n - self.nx)
-            self._cache_key, self._PhiGam = key, (F, Gam)
-        return self._PhiGam
+            A = self._A.copy()
+            A[: self.nx, : self.nx] = A_u.toarray() if sp.issparse(A_u) else A_u
+            Phi, Gam = zoh(A, self.dt)
+            Qd = process_noise_np(A, self.Qc, self.dt)
+            self._cache_key, self._trans = key, (Phi, Gam[:, : self.nx], Qd)
+        return self._trans
 
     def predict(self, u) -> None:
         """Propagate over one plant step with the applied input vector ``u``.
@@ -264,25 +295,14 @@ class GainKalmanFilter:
             Model input (``ms``, ``Ts``, ``T[b]``, ``Q``) held over the step; ``Q`` is what
             the controller knows of the gains (0 here — the gain states carry them).
         """
-        F, Gam = self._transition(u)
+        Phi, Gam, Qd = self._transition(u)
         _, b = self.model.affine(u, mats=self._mats)
-        z = F @ self.z
-        z[: self.nx] += Gam @ b
-        self.z = z
-        self.P = F @ self.P @ F.T + self.Qn
+        self.z, self.P = filter_predict(self.z, self.P, Phi, Qd, Gam @ b)
 
     def update(self, y) -> None:
         """Correct with measured zone temperatures ``y`` [°C] (NaN entries are skipped)."""
-        y = np.asarray(y, dtype=float)
-        ok = np.isfinite(y)
-        if not ok.any():
-            return
-        H, R = self.H[ok], self.R[np.ix_(ok, ok)]
-        S = H @ self.P @ H.T + R
-        K = np.linalg.solve(S, H @ self.P).T
-        self.z = self.z + K @ (y[ok] - H @ self.z)
-        I_KH = np.eye(self.n) - K @ H
-        self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T  # Joseph form: stays symmetric PSD
+        self.z, self.P, _ = filter_update(self.z, self.P, np.asarray(y, dtype=float), self.H,
+                                          self.R)
 
     def run(self, data: pd.DataFrame) -> pd.DataFrame:
         """Replay logged BAS data through the filter, one filter step (``dt``) at a time.
@@ -322,6 +342,17 @@ class GainKalmanFilter:
         return pd.DataFrame(G, index=times, columns=[f"gain:{z}" for z in
                                                      (self.model.network.zones[i]
                                                       for i in self.meas_idx)])
+
+
+def _hand_set_noise(cz, zones, measured, sd_zone, sd_edge, sd_gain, sd_meas):
+    """The hand-set noise as grey-box parameters, and the edge states' intensity [K²/s].
+
+    Per hour [K/√h, W/√h] → per second: ``σ_q[z] = sd_zone·C_z/60`` [W s^0.5] gives the
+    intensity ``sd_zone²/3600`` [K²/s] on ``T[z]``; ``σ_φ = sd_gain/60`` [W/√s].
+    """
+    params = {f"sigma_q[{z}]": sd_zone * c / 60.0 for z, c in zip(zones, cz)}
+    params.update(sigma_phi=sd_gain / 60.0, sigma_v=sd_meas)
+    return params, sd_edge ** 2 / 3600.0
 
 
 def logged_steps(net, data: pd.DataFrame, dt: float, measured):

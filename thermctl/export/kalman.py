@@ -7,13 +7,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 
 from ..errors import ModelError
+from ..estimate.likelihood.kalman import dare_np, process_noise_np
 from ..model import OperatingPoint, ThermalModel, zoh
 from .disturbances import disturbances, greybox_params
 
-__all__ = ["KalmanFilter", "kalman_filter"]
+__all__ = ["KalmanFilter", "kalman_filter", "augment_noise", "has_noise_model"]
 
 
 @dataclass
@@ -87,84 +87,70 @@ def _per(params, group, names, what):
                          f"{exc.args[0]} for {what}") from None
 
 
-def _noise_discretize(A, Qc, dt):
-    """``Qd = ∫₀^dt e^{As} Qc e^{Aᵀs} ds`` by Van Loan at a short step, then doubling.
-
-    Van Loan's block exponential at the full step holds ``e^{-A dt}``, which overflows for
-    the convection edges (time constants of seconds against a step of minutes), so it is
-    taken at ``h = dt/2^s`` with ``‖A‖₁ h ≤ 1/4`` and doubled exactly:
-    ``Q(2h) = Φ(h) Q(h) Φ(h)ᵀ + Q(h)``, ``Φ(2h) = Φ(h)²``.
-    """
-    n = A.shape[0]
-    norm = float(np.abs(A).sum(axis=0).max()) * dt
-    s = max(0, int(np.ceil(np.log2(max(norm, 1e-300) / 0.25)))) if norm > 0.25 else 0
-    h = dt / 2.0 ** s
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n] = -A * h
-    M[:n, n:] = Qc * h
-    M[n:, n:] = A.T * h
-    E = sla.expm(M)
-    Phi = E[n:, n:].T
-    Qd = Phi @ E[:n, n:]
-    for _ in range(s):
-        Qd = Phi @ Qd @ Phi.T + Qd
-        Phi = Phi @ Phi
-    return 0.5 * (Qd + Qd.T)
+def has_noise_model(params: dict) -> bool:
+    """Whether grey-box parameters hold a noise model (a sensor noise ``sigma_v``)."""
+    return any(k == "sigma_v" or k.startswith("sigma_v[") for k in params)
 
 
-def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = None):
-    """The grey-box noise model of ``model.json`` at ``op`` (``None`` if it has none).
+def augment_noise(params: dict, A0, cz, zones, measured):
+    """The grey-box noise model on a network's state matrix: augmented ``A``, ``C``, ``Qc``, ``R``.
 
-    Built from ``model.meta["greybox"]["params"]``: ``sigma_q`` (heat noise per zone
-    [W s^0.5], intensity ``(σ_q/C_z)²`` on ``T[z]``), ``sigma_phi`` (random-walk gain per
-    measured zone [W/s^0.5]), ``sigma_v`` (sensor noise [K]) and, if identified, the AR(1)
-    sensor error ``sigma_e`` [K], ``tau_e`` [s]. Each is shared or per zone (``sigma_q[r1]``).
-    Models identified with ``--criterion simulation`` have no noise model.
+    The state is the network's (``n_net`` states, zones first) followed by one random-walk
+    heat gain ``d[z]`` [W] per measured zone if ``sigma_phi`` is given, and the AR(1) sensor
+    errors ``e[z]`` [K] if ``sigma_e`` and ``tau_e`` are. Shared by :func:`kalman_filter`
+    (at an operating point) and by filters whose network block changes with the supply
+    flow (the MPC examples'), so the noise model is written once.
 
     Parameters
     ----------
-    model : ThermalModel
-    op : OperatingPoint
-    dt : float, optional
-        Sample time [s]: also the exact discretisation and the stationary filter.
+    params : dict
+        Grey-box parameters (``sigma_q`` [W s^0.5], ``sigma_phi`` [W/s^0.5], ``sigma_v`` [K],
+        ``sigma_e`` [K], ``tau_e`` [s]), each shared or per zone (``sigma_q[r1]``).
+    A0 : ndarray, shape (n_net, n_net)
+        The network's state matrix [1/s].
+    cz : ndarray, shape (n_zones,)
+        Zone capacitances [J/K].
+    zones : list of str
+        The network's zones (the first states).
+    measured : list of str
+        Measured zones: the outputs, and the zones that get a gain and a sensor error.
 
     Returns
     -------
-    KalmanFilter or None
+    A : ndarray, shape (n, n)
+        [1/s]; the network block is ``A0``.
+    C : ndarray, shape (n_measured, n)
+    Qc : ndarray, shape (n, n)
+        Process noise intensity [K²/s for temperatures, W²/s for gains].
+    R : ndarray, shape (n_measured, n_measured)
+        Sensor noise covariance [K²].
+    extra : list of str
+        Names of the states after the network's (``d[z]``, then ``e[z]``).
     """
-    p = greybox_params(model)
-    if not any(k == "sigma_v" or k.startswith("sigma_v[") for k in p):
-        return None
+    p = params
     if any(k.startswith(("sigma_b", "tau_b")) for k in p):
         raise ModelError("model.json meta greybox.params: boundary-noise states (sigma_b, tau_b) "
                          "are not exported; their boundary nodes are not recorded in the model")
-    net = model.network
-    nz, n_net = net.n_zones, net.n_states
-    measured = [z for z in net.spec.measured_zones if z in net.zones]
-    mi = [net.zones.index(z) for z in measured]
+    zones = list(zones)
+    nz, n_net = len(zones), A0.shape[0]
+    mi = [zones.index(z) for z in measured]
     ny = len(measured)
-    cz = 1.0 / np.asarray(model.sym.inv_cz, float)
     has_d = any(k == "sigma_phi" or k.startswith("sigma_phi[") for k in p)
     has_e = "sigma_e" in p and "tau_e" in p
     nd, ne = (ny if has_d else 0), (ny if has_e else 0)
     n = n_net + nd + ne
-    dist = disturbances(model)
-    A0, B0 = model.jacobians(op)
-    B0 = np.hstack([B0, dist.E])
     A = np.zeros((n, n))
     A[:n_net, :n_net] = A0
-    B = np.zeros((n, B0.shape[1]))
-    B[:n_net] = B0
     Qc = np.zeros((n, n))
-    sq = _per(p, "sigma_q", net.zones, "every zone")
+    sq = _per(p, "sigma_q", zones, "every zone")
     Qc[np.arange(nz), np.arange(nz)] = (sq / cz) ** 2
-    states = list(net.state_names)
+    extra = []
     if nd:
         sphi = _per(p, "sigma_phi", measured, "every measured zone")
         for j, i in enumerate(mi):
             A[i, n_net + j] = 1.0 / cz[i]
             Qc[n_net + j, n_net + j] = sphi[j] ** 2
-        states += [f"d[{z}]" for z in measured]
+        extra += [f"d[{z}]" for z in measured]
     C = np.zeros((ny, n))
     C[np.arange(ny), mi] = 1.0
     if ne:
@@ -173,23 +159,61 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
         A[k, k] = -1.0 / tau_e
         Qc[k, k] = 2.0 * sig_e ** 2 / tau_e
         C[np.arange(ny), k] = 1.0
-        states += [f"e[{z}]" for z in measured]
+        extra += [f"e[{z}]" for z in measured]
     R = np.diag(_per(p, "sigma_v", measured, "every measured zone") ** 2)
+    return A, C, Qc, R, extra
+
+
+def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = None):
+    """The grey-box noise model of ``model.json`` at ``op`` (``None`` if it has none).
+
+    Built from ``model.meta["greybox"]["params"]`` (:func:`augment_noise`): ``sigma_q``
+    (heat noise per zone [W s^0.5], intensity ``(σ_q/C_z)²`` on ``T[z]``), ``sigma_phi``
+    (random-walk gain per measured zone [W/s^0.5]), ``sigma_v`` (sensor noise [K]) and, if
+    identified, the AR(1) sensor error ``sigma_e`` [K], ``tau_e`` [s]. Each is shared or per
+    zone (``sigma_q[r1]``). Models identified with ``--criterion simulation`` have no noise
+    model.
+
+    Parameters
+    ----------
+    model : ThermalModel
+    op : OperatingPoint
+    dt : float, optional
+        Sample time [s]: also the exact discretisation (:func:`~thermctl.model.zoh`,
+        :func:`~thermctl.estimate.likelihood.kalman.process_noise_np`) and the stationary
+        filter (:func:`~thermctl.estimate.likelihood.kalman.dare_np`).
+
+    Returns
+    -------
+    KalmanFilter or None
+    """
+    p = greybox_params(model)
+    if not has_noise_model(p):
+        return None
+    net = model.network
+    n_net = net.n_states
+    measured = [z for z in net.spec.measured_zones if z in net.zones]
+    cz = 1.0 / np.asarray(model.sym.inv_cz, float)
+    dist = disturbances(model)
+    A0, B0 = model.jacobians(op)
+    B0 = np.hstack([B0, dist.E])
+    A, C, Qc, R, extra = augment_noise(p, A0, cz, net.zones, measured)
+    B = np.zeros((A.shape[0], B0.shape[1]))
+    B[:n_net] = B0
     used = {k: float(v) for k, v in p.items() if k.startswith(("sigma_", "tau_e"))}
-    kf = KalmanFilter(states=states, inputs=net.input_names + dist.names,
+    kf = KalmanFilter(states=list(net.state_names) + extra, inputs=net.input_names + dist.names,
                       outputs=[f"T[{z}]" for z in measured], A=A, B=B, C=C, Qc=Qc, R=R,
                       params=used)
     if dt is not None:
         if not dt > 0:
             raise ModelError(f"dt must be > 0 [s], found {dt}")
         Phi, Gam = zoh(A, dt)
-        Qd = _noise_discretize(A, Qc, dt)
+        Qd = process_noise_np(A, Qc, dt)
         try:
-            P = sla.solve_discrete_are(Phi.T, C.T, Qd, R)
-        except (np.linalg.LinAlgError, ValueError) as exc:
+            P, _ = dare_np(Phi, C, Qd, R)
+        except (np.linalg.LinAlgError, FloatingPointError) as exc:
             raise ModelError(f"stationary Kalman filter at dt={dt:g} s: the Riccati equation "
                              f"has no stabilising solution ({exc})") from None
-        P = 0.5 * (P + P.T)
         K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
         kf.dt, kf.Phi, kf.Gamma, kf.Qd, kf.P, kf.K = float(dt), Phi, Gam @ B, Qd, P, K
     return kf

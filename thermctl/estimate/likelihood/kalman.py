@@ -30,7 +30,10 @@ Why the functions below look the way they do:
   exact reverse derivative through the adjoint Stein equation (≈3× faster than the
   doubling graph for 60 states; used by default).
 * :func:`kalman_filter` is the plain time-varying filter (Joseph form, missing outputs
-  dropped row by row) in numpy: the reference for tests and for diagnostics.
+  dropped row by row) in numpy: the reference for tests and for diagnostics. Its two steps,
+  :func:`filter_update` and :func:`filter_predict`, and :func:`process_noise_np` (the
+  numpy form of :func:`discretize`'s ``Q_d``) are what every other filter in the package
+  uses (the export's stationary filter, the MPC examples' online filter).
 """
 
 from __future__ import annotations
@@ -46,9 +49,9 @@ from ..._blas import single_thread_blas
 from ...errors import EstimationError
 
 __all__ = ["expm_taylor", "n_squarings", "discretize", "discretize_np", "dare_sda", "dare_np",
-           "stein_np", "DareCallback",
-           "stationary_filter", "kalman_filter", "KalmanResult", "chunked_recursion",
-           "LOG2PI"]
+           "stein_np", "DareCallback", "process_noise_np",
+           "stationary_filter", "kalman_filter", "filter_update", "filter_predict",
+           "KalmanResult", "chunked_recursion", "LOG2PI"]
 
 LOG2PI = math.log(2.0 * math.pi)
 
@@ -175,6 +178,48 @@ def discretize_np(A, B, Sigma, dt: float):
         f = np.where(np.abs(s) * dt > 1e-12, np.expm1(s * dt) / s, dt)
     Q = V @ (St * f) @ V.T
     return E[:n, :n], E[:n, n:], 0.5 * (Q + Q.T)
+
+
+def process_noise_np(A, Sigma, dt: float):
+    r"""``Q_d = ∫₀^dt e^{As} Σ e^{Aᵀs} ds`` in numpy, the way :func:`discretize` computes it.
+
+    Van Loan's block exponential at the full step holds ``e^{-A dt}``, which overflows for
+    the convection edges (time constants of seconds against a step of minutes), so it is
+    taken at ``h = dt/2^s`` with ``‖A‖₁ h ≤ 1/4`` and doubled exactly:
+    ``Q(2h) = Φ(h) Q(h) Φ(h)ᵀ + Q(h)``, ``Φ(2h) = Φ(h)²``. Unlike :func:`discretize_np`
+    (the modal reference) it needs no eigen-decomposition, so it also holds for
+    augmented models with defective eigenvalues.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix [1/s].
+    Sigma : ndarray, shape (n, n)
+        Process noise intensity [state unit²/s], symmetric PSD.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        ``Q_d`` [state unit²] (symmetrised).
+    """
+    A = np.asarray(A, dtype=float)
+    n = A.shape[0]
+    norm = float(np.abs(A).sum(axis=0).max()) * dt
+    s = n_squarings(norm) if norm > _NORM_TARGET else 0
+    h = dt / 2.0 ** s
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -A * h
+    M[:n, n:] = np.asarray(Sigma, dtype=float) * h
+    M[n:, n:] = A.T * h
+    E = sla.expm(M)
+    Phi = E[n:, n:].T
+    Qd = Phi @ E[:n, n:]
+    for _ in range(s):
+        Qd = Phi @ Qd @ Phi.T + Qd
+        Phi = Phi @ Phi
+    return 0.5 * (Qd + Qd.T)
 
 
 def dare_sda(Phi, C, Qd, R, iterations: int = 40):
@@ -382,25 +427,14 @@ def _kalman_filter(Phi, Gamma, Qd, C, R, W, Y, x0, P0, skip):
     Sd = np.full((N, ny), np.nan)
     nll = 0.0
     n_obs = 0
-    I = np.eye(n)
     for k in range(N):
         xp[k] = x
-        obs = np.isfinite(Y[k])
-        if obs.any():
-            Ck = C[obs]
-            e = Y[k, obs] - Ck @ x
-            S = Ck @ P @ Ck.T + R[np.ix_(obs, obs)]
-            S = 0.5 * (S + S.T)
-            try:
-                Lc = np.linalg.cholesky(S)
-            except np.linalg.LinAlgError:
-                raise FloatingPointError(f"innovation covariance not positive definite at step {k}")
-            Kt = sla.cho_solve((Lc, True), Ck @ P)      # = S^{-1} C P
-            K = Kt.T
-            x = x + K @ e
-            IKC = I - K @ Ck
-            P = IKC @ P @ IKC.T + K @ R[np.ix_(obs, obs)] @ K.T
-            P = 0.5 * (P + P.T)
+        try:
+            x, P, up = filter_update(x, P, Y[k], C, R)
+        except FloatingPointError as exc:
+            raise FloatingPointError(f"{exc} at step {k}") from None
+        if up is not None:
+            e, S, Lc, obs = up
             inn[k, obs] = e
             Sd[k, obs] = np.diag(S)
             if k >= skip:
@@ -409,11 +443,76 @@ def _kalman_filter(Phi, Gamma, Qd, C, R, W, Y, x0, P0, skip):
                 n_obs += int(obs.sum())
         xf[k] = x
         if k < N - 1:
-            x = Phi @ x + Gamma @ W[k]
-            P = Phi @ P @ Phi.T + Qd
-            P = 0.5 * (P + P.T)
+            x, P = filter_predict(x, P, Phi, Qd, Gamma @ W[k])
     std = inn / np.sqrt(Sd)
     return KalmanResult(float(nll), xp, xf, inn, Sd, std, P, n_obs)
+
+
+def filter_update(x, P, y, C, R):
+    """Measurement update of a Kalman filter (Joseph form), rows of ``y`` that are NaN dropped.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Predicted state ``x̂_{k|k-1}``.
+    P : ndarray, shape (n, n)
+        Its covariance.
+    y : ndarray, shape (ny,)
+        Measured outputs; NaN where missing.
+    C : ndarray, shape (ny, n)
+    R : ndarray, shape (ny, ny)
+        Measurement noise covariance [output unit²].
+
+    Returns
+    -------
+    x, P : ndarray
+        Filtered state ``x̂_{k|k}`` and its covariance (unchanged if nothing is observed).
+    update : tuple or None
+        ``(e, S, Lc, obs)``: innovations of the observed rows, their covariance, its lower
+        Cholesky factor and the mask of observed rows; ``None`` if nothing is observed.
+    """
+    obs = np.isfinite(y)
+    if not obs.any():
+        return x, P, None
+    Ck = C[obs]
+    Rk = R[np.ix_(obs, obs)]
+    e = y[obs] - Ck @ x
+    S = Ck @ P @ Ck.T + Rk
+    S = 0.5 * (S + S.T)
+    try:
+        Lc = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        raise FloatingPointError("innovation covariance not positive definite") from None
+    K = sla.cho_solve((Lc, True), Ck @ P).T      # = (S^{-1} C P)^T
+    x = x + K @ e
+    IKC = np.eye(x.shape[0]) - K @ Ck
+    # Joseph form: P stays symmetric positive semi-definite whatever the gain's round-off
+    P = IKC @ P @ IKC.T + K @ Rk @ K.T
+    P = 0.5 * (P + P.T)
+    return x, P, (e, S, Lc, obs)
+
+
+def filter_predict(x, P, Phi, Qd, drift):
+    """Time update of a Kalman filter over one step: ``x⁺ = Φ x + drift``, ``P⁺ = Φ P Φᵀ + Q_d``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+    P : ndarray, shape (n, n)
+    Phi : ndarray, shape (n, n)
+        State transition over the step.
+    Qd : ndarray, shape (n, n)
+        Process noise covariance over the step (:func:`process_noise_np`).
+    drift : ndarray, shape (n,)
+        Effect of the inputs held over the step (``Γ w``).
+
+    Returns
+    -------
+    x, P : ndarray
+    """
+    x = Phi @ x + drift
+    P = Phi @ P @ Phi.T + Qd
+    return x, 0.5 * (P + P.T)
 
 
 # ---------------------------------------------------------------------------------------
