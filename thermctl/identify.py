@@ -94,17 +94,25 @@ class SelectionOptions:
     criterion : {"bic", "aic", "holdout"}
     margin : float
         Criterion improvement an edge must bring to stay in the model [-].
+    min_t : float
+        Consistency an edge's gain must show as well: the t statistic of its daily
+        likelihood gains (:meth:`~thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`),
+        which holds when the model is only approximately right and BIC does not [-];
+        0 turns the test off.
     """
 
     method: str = "auto"
     candidates: str = "sin"
     criterion: str = "bic"
     margin: float = 10.0
+    min_t: float = 0.0
 
     def check(self):
         _one_of("selection", "method", self.method, SELECTIONS)
         _one_of("selection", "candidates", self.candidates, ("sin", "sin+pairs", "all"))
         _one_of("selection", "criterion", self.criterion, ("bic", "aic", "holdout"))
+        if not self.min_t >= 0:
+            raise DataError(f"identify option selection.min_t must be >= 0, found {self.min_t}")
 
 
 @dataclass
@@ -476,6 +484,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
             sel = select_air_paths(spec, cal, candidates=cands,
                                    criterion=opt.selection.criterion, direction=direction,
                                    margin=opt.selection.margin, progress=say, on_fit=on_fit,
+                                   min_t=opt.selection.min_t,
                                    start=start or (), final_criterion=opt.estimation.criterion,
                                    solar=opt.estimation.solar)
         net = ThermalNetwork(spec, sel.edges)
@@ -513,7 +522,7 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
                         client=client or opt.split.scheduler, progress=progress,
                         fit_rows=opt.split.rows, latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
-                        s_min=opt.structure.s_min)
+                        s_min=opt.structure.s_min, min_t=opt.selection.min_t)
     return _finish_local(meas, cal, val, opt, li, progress)
 
 
@@ -626,7 +635,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         results = run_local(problems, frames, workers=opt.split.workers, client=client,
                             progress=progress, criterion=opt.selection.criterion,
                             margin=opt.selection.margin, solar=opt.estimation.solar,
-                            fit_rows=opt.split.rows) if problems else []
+                            fit_rows=opt.split.rows, min_t=opt.selection.min_t) if problems else []
         wall = _time.perf_counter() - t0
         out = {}
         for k in local:

@@ -758,7 +758,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                    client=None, progress=None, parallel: bool = True,
                    fit_rows: str = "all", latent_depth: int | None = 1,
                    candidates: str = "all", level: float = 0.05,
-                   s_min: float = 0.25) -> LocalIdentification:
+                   s_min: float = 0.25, min_t: float = 0.0) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -788,6 +788,9 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         What each local search starts from (:func:`fit_local`).
     level, s_min : float
         ``candidates="sin"``: SIN level and score threshold [-].
+    min_t : float
+        Daily consistency an air path's gain must show in its local search
+        (:meth:`thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`); 0: off.
 
     Returns
     -------
@@ -804,7 +807,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     if candidates == "sin":
         problems, _ = propose_sin(problems, frame, level, s_min)
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
-                        criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows)
+                        criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows,
+                        min_t=min_t)
     return assemble(problems, results, rule, margin, time.perf_counter() - t0)
 
 

@@ -99,7 +99,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      holdout: float = 0.3, final_per_edge: bool = False,
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
-                     **estimator_kwargs) -> SelectionResult:
+                     min_t: float = 0.0, **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -150,6 +150,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         ``progress(message)`` after each decision.
     on_fit : callable, optional
         ``on_fit(n)`` after each full fit (``n`` fits so far): a heartbeat for long searches.
+    min_t : float
+        An edge's gain must also hold day by day: the t statistic of its daily likelihood
+        gains (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
     **estimator_kwargs
         Passed to every :class:`LikelihoodEstimator` (model options, solver...).
 
@@ -165,7 +168,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     cands = as_candidates(spec, candidates)
     by_name = {c.name: c for c in cands}
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
-                              max_iter=max_iter, on_fit=on_fit, **estimator_kwargs)
+                              max_iter=max_iter, on_fit=on_fit, min_t=min_t, **estimator_kwargs)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
                        margin=margin, progress=progress)

@@ -89,6 +89,9 @@ def identify(
                                    "forward over all measured pairs) or all."),
     margin: float = typer.Option(_D.selection.margin, help="--selection model: BIC improvement "
                                  "an edge must bring."),
+    min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model: t "
+                                "statistic of its daily likelihood gains an edge must reach as "
+                                "well (holds under model misfit, unlike BIC); 0: off."),
     selection_criterion: str = typer.Option(_D.selection.criterion, help="--selection model: bic, "
                                             "aic or holdout (likelihood of the last 30 % of the "
                                             "calibration days)."),
@@ -169,7 +172,8 @@ def identify(
         structure=StructureOptions(method=method, level=level, rule=rule, s_min=s_min,
                                    allow_parallel=allow_parallel),
         selection=SelectionOptions(method=selection, candidates=candidates,
-                                   criterion=selection_criterion, margin=margin),
+                                   criterion=selection_criterion, margin=margin,
+                                   min_t=min_t),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
                                      initial_state=initial_state, grid=grid),

@@ -17,6 +17,12 @@ Greedy search (Bacher & Madsen 2011 style):
    costs least if that is less than ``margin``; repeat. When no removal is cheap enough,
    the removal costs are recorded as a ``keep`` step: the evidence for every kept edge.
 
+A scorer may also judge whether a gain is *consistent* (``scorer.consistent(small,
+big)``, optional): then an edge must pass that test too, to enter and to stay. The
+likelihood scorer's test asks the gain to hold day by day, which an information
+criterion cannot see when the model is only approximately right (see
+:meth:`thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`).
+
 Candidates are every zone pair with a known air-path length, **including pairs already
 joined by a wall** (:func:`candidate_pairs`): an open door beside a wall is an air path
 too, and a model criterion can tell a wall's conduction from mixing only by fitting both.
@@ -135,6 +141,9 @@ class Scorer(Protocol):
     def screen(self, edges: list, rest: list, fitted) -> dict:
         """Edge name → criterion change of adding each of ``rest`` to ``edges``, cheaply."""
 
+    # optional: consistent(small, big) -> (bool, float, str): whether ``big`` (one more
+    # edge) is better than ``small`` consistently, a statistic and a few words on it
+
 
 def candidate_pairs(spec, zones=None, include_unmeasured: bool = True,
                     parallel: bool = True) -> list[Candidate]:
@@ -207,6 +216,11 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                           note=f"{len(cur)} edge(s)")]
     reasons, best_screen = {}, {}
     say = progress or (lambda msg: None)
+    consistent = getattr(scorer, "consistent", None)
+
+    def holds(small, big):
+        return (True, float("nan"), "") if consistent is None else consistent(small, big)
+
     if direction in ("forward", "both"):
         while max_edges is None or len(cur) < max_edges:
             rest = [c for c in cands if c not in cur]
@@ -218,19 +232,23 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             c = by_name[pick]
             f_full, v_full = scorer.fit(cur + [c], warm=fitted)
             d = v_full - val
-            if d < -margin:
+            ok, _, why = holds(fitted, f_full) if d < -margin else (True, 0.0, "")
+            if d < -margin and ok:
                 cur = cur + [c]
                 fitted, val = f_full, v_full
                 path.append(SelectionStep("add", pick, val, d, [x.name for x in cur], screened,
                                           note=scorer.describe(c, f_full)
                                           if hasattr(scorer, "describe") else ""))
-                reasons[pick] = f"added: {crit} {d:+.1f} when added"
-                say(f"added {pick} ({crit} {d:+.1f})")
+                reasons[pick] = f"added: {crit} {d:+.1f} when added" + (f", {why}" if why
+                                                                        else "")
+                say(f"added {pick} ({crit} {d:+.1f}{', ' + why if why else ''})")
             else:
+                note = (f"best candidate improves the criterion by less than the margin "
+                        f"{margin:g}" if ok else f"best candidate's gain is not consistent: {why}")
                 path.append(SelectionStep("stop", pick, val, d, [x.name for x in cur], screened,
-                                          note=f"best candidate improves the criterion by less "
-                                               f"than the margin {margin:g}"))
-                say(f"stop: best candidate {pick} gives {crit} {d:+.1f}")
+                                          note=note))
+                say(f"stop: best candidate {pick} gives {crit} {d:+.1f}"
+                    + ("" if ok else f", {why}"))
                 break
     if direction in ("backward", "both"):
         while cur:
@@ -238,18 +256,30 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             for c in cur:
                 f2, v2 = scorer.fit([x for x in cur if x != c], warm=fitted)
                 trials[c.name] = (v2 - val, f2, v2)
-            pick = min(trials, key=lambda k: trials[k][0])
+            # an edge whose gain does not hold consistently goes first (the weakest such)
+            weak, said = {}, {}
+            for k, t in trials.items():
+                if t[0] < margin:
+                    continue
+                ok, stat, said[k] = holds(t[1], fitted)
+                if not ok:
+                    weak[k] = (stat, said[k])
+            pick = (min(weak, key=lambda k: weak[k][0]) if weak
+                    else min(trials, key=lambda k: trials[k][0]))
             d, f2, v2 = trials[pick]
-            if d < margin:
+            if d < margin or pick in weak:
                 cur = [x for x in cur if x.name != pick]
                 fitted, val = f2, v2
+                why = (f"its gain is not consistent: {weak[pick][1]}" if pick in weak
+                       else f"it improves the criterion by less than the margin {margin:g}")
                 path.append(SelectionStep("remove", pick, val, d, [x.name for x in cur],
-                                          {k: t[0] for k, t in trials.items()},
-                                          note=f"it improves the criterion by less than the "
-                                               f"margin {margin:g}"))
-                reasons[pick] = (f"removed: {crit} only {d:+.1f} when removed "
+                                          {k: t[0] for k, t in trials.items()}, note=why))
+                reasons[pick] = (f"removed: {crit} {d:+.1f} when removed, {weak[pick][1]}"
+                                 if pick in weak else
+                                 f"removed: {crit} only {d:+.1f} when removed "
                                  f"(margin {margin:g})")
-                say(f"removed {pick} ({crit} {d:+.1f})")
+                say(f"removed {pick} ({crit} {d:+.1f}"
+                    + (f", {weak[pick][1]})" if pick in weak else ")"))
             else:
                 # the kept structure's evidence: what removing each edge would cost
                 path.append(SelectionStep("keep", None, val, d, [x.name for x in cur],
@@ -259,7 +289,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 for k, t in trials.items():
                     if k not in reasons or reasons[k].startswith("added"):
                         reasons[k] = (reasons.get(k, "in") + f"; removing it costs {crit} "
-                                      f"{t[0]:+.1f}")
+                                      f"{t[0]:+.1f}" + (f", {said[k]}" if said.get(k) else ""))
                 break
     for c in cands:
         if c.name not in reasons:

@@ -1,0 +1,112 @@
+"""The daily-consistency test of an air path's gain (issue 20's stop rule under misfit).
+
+`LikelihoodScorer.consistent` judges ``g_d = nll_d(small) − nll_d(big)`` by its t statistic
+over days; `search_edges` asks it to admit and to keep an edge. Stubs give exact t values;
+one real problem checks that the blocks add up to the likelihood.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+from thermctl.structure.search import Candidate, search_edges
+
+
+def _fitted(day_nll):
+    """A stand-in for a fitted estimator whose problem returns these daily nll."""
+    day_nll = np.asarray(day_nll, float)
+    pb = SimpleNamespace(block_nll=lambda eta, block: (np.arange(len(day_nll)), day_nll))
+    return SimpleNamespace(problem_=pb, eta_=None)
+
+
+def _scorer(min_t):
+    sc = LikelihoodScorer.__new__(LikelihoodScorer)   # no data needed for consistent()
+    sc.min_t, sc.block, sc.test = min_t, 86400.0, None
+    return sc
+
+
+def test_consistent_gain_on_every_day_passes():
+    small = _fitted([100.0, 110.0, 90.0, 105.0, 95.0])
+    big = _fitted([90.0, 101.0, 80.0, 96.0, 84.0])        # gains 10, 9, 10, 9, 11
+    ok, t, note = _scorer(2.0).consistent(small, big)
+    g = np.array([10.0, 9.0, 10.0, 9.0, 11.0])
+    assert ok and t == pytest.approx(g.mean() / (g.std(ddof=1) / math.sqrt(5)))
+    assert "better on 5 of 5 days" in note
+
+
+def test_gain_made_on_one_day_fails_though_its_sum_is_large():
+    # +400 on one day, small losses on seven: a BIC gain of 2·372 = 744, t = 0.93
+    g = np.array([400.0, -4.0, -4.0, -4.0, -4.0, -4.0, -4.0, -4.0])
+    small = _fitted(np.full(8, 1000.0))
+    big = _fitted(1000.0 - g)
+    ok, t, note = _scorer(2.0).consistent(small, big)
+    assert not ok
+    assert t == pytest.approx(g.mean() / (g.std(ddof=1) / math.sqrt(8)))
+    assert t < 1.0 and "better on 1 of 8 days" in note
+
+
+def test_too_few_days_or_test_off_leave_the_decision_to_the_criterion():
+    assert _scorer(2.0).consistent(_fitted([1.0, 2.0, 3.0]), _fitted([0.0, 3.0, 2.0]))[0]
+    ok, t, note = _scorer(0.0).consistent(_fitted(np.ones(9)), _fitted(np.ones(9) + 5))
+    assert ok and math.isnan(t) and note == ""
+
+
+class _Stub:
+    """Scorer over edges {A, B}: both improve BIC by a lot; B's gain is not consistent."""
+
+    name = "bic"
+    VALUE = {(): 0.0, ("A",): -100.0, ("B",): -60.0, ("A", "B"): -150.0}
+
+    def fit(self, edges, warm=None):
+        key = tuple(sorted(c.a for c in edges))
+        return key, self.VALUE[key]
+
+    def screen(self, edges, rest, fitted):
+        base = self.VALUE[fitted]
+        return {c.name: self.VALUE[tuple(sorted(fitted + (c.a,)))] - base for c in rest}
+
+    def consistent(self, small, big):
+        ok = "B" not in big or "B" in small
+        return ok, (5.0 if ok else 0.4), "stub"
+
+
+def _cands():
+    return [Candidate("A", "z", 1.0), Candidate("B", "z", 1.0)]
+
+
+@pytest.mark.parametrize("direction", ["both", "backward"])
+def test_search_keeps_only_the_edge_whose_gain_holds(direction):
+    res = search_edges(_cands(), _Stub(), direction=direction, margin=10.0)
+    assert [c.a for c in res.edges] == ["A"]
+    b = [k for k in res.reasons if k.startswith("air:B")][0]
+    assert "stub" in res.reasons[b] or "not consistent" in " ".join(s.note for s in res.path)
+
+
+def test_without_the_test_both_edges_enter():
+    stub = _Stub()
+    stub.consistent = lambda small, big: (True, float("nan"), "")
+    res = search_edges(_cands(), stub, direction="both", margin=10.0)
+    assert sorted(c.a for c in res.edges) == ["A", "B"]
+
+
+def test_block_nll_adds_up_to_the_likelihood():
+    from thermctl.data import read_measurements
+    from thermctl.estimate.likelihood import LikelihoodEstimator
+    from thermctl.network import ThermalNetwork
+    from thermctl.testbed import generate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=4, seed=0)
+        meas = read_measurements(tb.data, tb.spec)
+        est = LikelihoodEstimator(ThermalNetwork(tb.spec, []), max_iter=20).fit(meas)
+    ids, b = est.problem_.block_nll(est.eta_)
+    assert list(ids) == [0, 1, 2, 3]
+    assert b.sum() == pytest.approx(est.problem_.nll(est.eta_), rel=1e-10)
+    ids6, b6 = est.problem_.block_nll(est.eta_, block=6 * 3600.0)
+    assert len(ids6) > 12 and b6.sum() == pytest.approx(b.sum(), rel=1e-10)
