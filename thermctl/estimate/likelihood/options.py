@@ -87,6 +87,20 @@ class LikelihoodOptions:
     holdoff : float
         With ``fit_rows="supply_off"``: time after the supply went off before samples
         count [s].
+    internal_mass : bool or "factor"
+        ``True``/``"factor"``: a fitted capacity factor ``cap_factor[zone]`` = f_z >= 1 per
+        measured zone multiplies the zone's capacitance C_z (spec ``capacitance`` or
+        ``capacity_multiplier·ρ·cp·V``): furniture, partitions and columns that the spec
+        omits and that exchange heat with the air much faster than the data step. Why a
+        factor and not a second RC node: a mass node is seen only through its zone's
+        temperature, and on a 10-min step the factor (one number) already captures the
+        first-order effect — the zone's time constant C_z·f_z/ΣG. On the twin house
+        (living room 106 kJ/K of air, ≈ 0.3 kW/K to its surfaces: τ ≈ 6 min < one
+        10-min sample) the air alone is quasi-static, so C is identified only once
+        f_z·C_z/ΣG exceeds a sample; its 0.93 MJ/K concrete column is f ≈ 9.
+        Optimised in ``log f`` within ``cap_factor_bounds``.
+    cap_factor_bounds : (float, float)
+        Bounds of the capacity factors [-] (1: the spec's capacitance is a lower bound).
     """
 
     per_edge: bool = False
@@ -113,6 +127,8 @@ class LikelihoodOptions:
     boundary_noise: object = None
     fit_rows: object = "auto"
     holdoff: float = 3 * 3600.0
+    internal_mass: object = False
+    cap_factor_bounds: tuple = (1.0, 30.0)
 
     def check(self):
         if self.riccati not in ("implicit", "doubling"):
@@ -132,5 +148,11 @@ class LikelihoodOptions:
         if self.supply_temperature not in ("midpoint", "start"):
             raise EstimationError("supply_temperature must be 'midpoint' or 'start', found "
                                   f"{self.supply_temperature!r}")
+        if self.internal_mass not in (False, None, True, "factor"):
+            raise EstimationError(f"internal_mass must be False, True or 'factor', found "
+                                  f"{self.internal_mass!r}")
+        lo, hi = self.cap_factor_bounds
+        if not 0 < lo < hi:
+            raise EstimationError(f"cap_factor_bounds: need 0 < lower < upper [-], found {lo}, {hi}")
         if not 0 < self.t_min < self.t_max:
             raise EstimationError(f"need 0 < t_min < t_max [s/m], found {self.t_min}, {self.t_max}")

@@ -27,6 +27,7 @@ GROUP_UNITS = {
     "tau_e": "s",
     "aperture": "m²",
     "gain": "W",
+    "cap_factor": "-",
 }
 """Unit of each parameter group."""
 

@@ -28,11 +28,15 @@ does not hold, which biases the likelihood (see :class:`.LikelihoodOptions`).
 Parameters (:mod:`.params`): R̄_v (shared or per edge), τ0 = R̄_v·C_v (its bounds are the
 paper's :math:`t_{min}/\alpha \le \tau_0 \le t_{max}/\alpha`), noise intensities σ_v, σ_q,
 σ_φ, solar apertures on measured ``solar:`` columns, and coefficients of a time-of-day
-basis of the gains (occupied/unoccupied levels or Fourier terms).
+basis of the gains (occupied/unoccupied levels or Fourier terms); with
+``internal_mass`` a capacity factor f_z >= 1 per measured zone (``C_z → f_z·C_z``: every
+term of the zone's equation, noise included, is divided by f_z).
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import logging
 import math
 
@@ -298,6 +302,14 @@ class LikelihoodProblem:
         if self.n_e:
             self.i_sige = lay.add(Param("sigma_e", "sigma_e", True, 0.015, 1e-4, 1.0))
             self.i_taue = lay.add(Param("tau_e", "tau_e", True, 1800.0, 60.0, 86400.0))
+        self.i_cf = []          # capacity factor per measured zone (internal_mass)
+        if opt.internal_mass:
+            lo_f, hi_f = opt.cap_factor_bounds
+            # start at 2, not on the bound 1: L-BFGS-B starting on a bound with a small
+            # gradient there may never leave it
+            f0 = float(np.clip(2.0, lo_f, hi_f))
+            self.i_cf = [lay.add(Param(f"cap_factor[{z}]", "cap_factor", True, f0, lo_f, hi_f))
+                         for z in mz]
         # linear parameters: entries of Theta (nz × n_basis)
         self.lin = []          # (param index, zone index, basis row)
         for b, (kind, name) in enumerate(self.basis_rows):
@@ -396,6 +408,25 @@ class LikelihoodProblem:
         cv = ca.exp(eta[self.i_tau] - lr)
         return ca.vertcat(rb, cv)
 
+    def _inv_factor(self, eta):
+        """``1/f`` per network state (MX column): 1 except the measured zones' capacity
+        factors (``internal_mass``); ``None`` without them."""
+        if not self.i_cf:
+            return None
+        P = np.zeros((self.n_net, self.ny))
+        P[self.meas, np.arange(self.ny)] = 1.0
+        rest = np.ones(self.n_net)
+        rest[self.meas] = 0.0
+        inv_f = ca.exp(-ca.vertcat(*[eta[i] for i in self.i_cf]))
+        return ca.mtimes(ca.DM(P), inv_f) + ca.DM(rest)
+
+    def zone_capacitances(self, eta) -> np.ndarray:
+        """Capacitance of every zone at ``eta`` [J/K] (the spec's, times the fitted factor)."""
+        cap = self.cap_z.copy()
+        if self.i_cf:
+            cap[self.meas] *= np.exp(np.asarray(eta, float)[self.i_cf])
+        return cap
+
     def _continuous(self, eta):
         n, n_net, nz = self.n, self.n_net, self.nz
         A, Bt = self.sym.AB(self._theta_net(eta))
@@ -404,13 +435,23 @@ class LikelihoodProblem:
         Sq = np.zeros((n_net, nz))
         Sq[np.arange(nz), np.arange(nz)] = inv_cz_kw
         B = ca.horzcat(ca.DM(Sq), Bt)
+        s = self._inv_factor(eta)
+        if s is not None:
+            # every term of a zone's equation is divided by its capacitance: a factor f_z
+            # scales the zone's row of A, B (heat, walls, boundaries) and of its gain and
+            # heat-noise inputs by 1/f_z
+            Sd = ca.diag(s)
+            A, B, Bt = ca.mtimes(Sd, A), ca.mtimes(Sd, B), ca.mtimes(Sd, Bt)
         n_x = n_net + self.n_d          # states before the sensor-error block
         if self.n_d:
             E = np.zeros((n_net, self.n_d))
             E[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
-            A = ca.vertcat(ca.horzcat(A, ca.DM(E)), ca.MX(self.n_d, n_x))
+            E = ca.DM(E) if s is None else ca.mtimes(ca.diag(s), ca.DM(E))
+            A = ca.vertcat(ca.horzcat(A, E), ca.MX(self.n_d, n_x))
             B = ca.vertcat(B, ca.MX(self.n_d, self.nw))
         sq = ca.vertcat(*[ca.exp(eta[i]) for i in self.i_sq]) * ca.DM(np.asarray(self.sym.inv_cz, float))
+        if s is not None:
+            sq = sq * s[:nz]
         diag = [sq ** 2, ca.MX(n_net - nz, 1)]
         if self.n_d:
             diag.append((ca.vertcat(*[ca.exp(eta[i]) for i in self.i_sphi]) * _KW) ** 2)
@@ -446,7 +487,7 @@ class LikelihoodProblem:
             vals.append(eta[i])
         return ca.reshape(ca.mtimes(ca.DM(S), ca.vertcat(*vals)), self.nz, nb_rows)
 
-    def _initial_states(self, A, B, ThB):
+    def _initial_states(self, A, B, ThB, eta):
         n_net, meas = self.n_net, self.meas
         rest = [i for i in range(n_net) if i not in meas]
         Anet = A[:n_net, :n_net]
@@ -472,7 +513,10 @@ class LikelihoodProblem:
             if self.n_d:
                 imb = ca.mtimes(Anet[meas, meas], ca.DM(ybar)) + ca.mtimes(Anet[meas, rest], xr) \
                     + bvec[meas]
-                phi = -imb * ca.DM(self.cap_z[meas]) * _KW
+                cap = ca.DM(self.cap_z[meas])
+                if self.i_cf:      # A's zone rows are divided by f: the imbalance in W is C·f·imb
+                    cap = cap * ca.exp(ca.vertcat(*[eta[i] for i in self.i_cf]))
+                phi = -imb * cap * _KW
                 x0 = ca.vertcat(x0, phi)
             if self.n_e + self.n_b:
                 x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e + self.n_b))
@@ -510,7 +554,7 @@ class LikelihoodProblem:
         P, S, Kf, change = kalman.stationary_filter(Phi, C, Qd, R, self.options.sda_iterations,
                                                     self._dare)
         ThB = self._theta_basis(eta)
-        X0 = self._initial_states(A, B, ThB)
+        X0 = self._initial_states(A, B, ThB, eta)
         PhiK = ca.mtimes(Phi, Kf)
         F = Phi - ca.mtimes(PhiK, C)
         ThB_full = ca.vertcat(ThB, ca.MX(self.nb, ThB.shape[1]))
@@ -683,14 +727,37 @@ class LikelihoodProblem:
         rb = np.exp(eta[self.i_rbar])
         return rb, np.exp(eta[self.i_tau]) / rb
 
+    def fitted_network(self, eta) -> ThermalNetwork:
+        """The network with the fitted zone capacitances at ``eta`` (``internal_mass``).
+
+        Without capacity factors, the network itself. With them, a shallow copy whose spec
+        gives every measured zone ``capacitance = f_z·C_z`` [J/K] explicitly, so that
+        :class:`ThermalModel`, its state-space export and ``model.json`` carry the mass.
+        """
+        if not self.i_cf:
+            return self.network
+        cap = self.zone_capacitances(eta)
+        spec = self.network.spec
+        zones = tuple(dataclasses.replace(z, capacitance=float(cap[self.zones.index(z.name)]))
+                      if z.name in self.zones and self.zones.index(z.name) in self.meas else z
+                      for z in spec.zones)
+        net = copy.copy(self.network)       # keeps edges, graph and any subclass state
+        net.spec = dataclasses.replace(spec, zones=zones)
+        return net
+
     def thermal_model(self, eta, meta: dict | None = None) -> ThermalModel:
-        """The identified :class:`ThermalModel` (network part) at ``eta``."""
+        """The identified :class:`ThermalModel` (network part) at ``eta``.
+
+        With ``internal_mass`` its network's spec holds the fitted zone capacitances
+        (:meth:`fitted_network`).
+        """
+        net = self.fitted_network(eta)
         rb, cv = self.rbar_c(eta)
         if not len(rb):
-            return ThermalModel(self.network, meta=meta)
+            return ThermalModel(net, meta=meta)
         if self.options.per_edge:
-            return ThermalModel(self.network, rbar_v=rb, c_v=cv, meta=meta)
-        return ThermalModel(self.network, rbar_v=float(rb[0]), c_v=float(cv[0]), meta=meta)
+            return ThermalModel(net, rbar_v=rb, c_v=cv, meta=meta)
+        return ThermalModel(net, rbar_v=float(rb[0]), c_v=float(cv[0]), meta=meta)
 
     def describe(self) -> str:
         return (f"{len(self.zones)} zones ({self.ny} measured), {len(self.edges)} convection "
