@@ -37,7 +37,7 @@ import json
 import logging
 import math
 import time as _time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -83,7 +83,7 @@ PLANTS = ("rc", "rc-exact", "fd")
 
 _FAMILY_DEFAULTS = {"plant": "rc", "walls": "types", "wall_spec": "u_value", "gains": "arrivals",
                     "gain_noise": None, "neighbour_noise": 0.0, "hide": 0, "floor_above": False,
-                    "fd_nodes": FD_NODES}
+                    "fd_nodes": FD_NODES, "internal_mass": None}
 
 T_MIN, T_MAX = 4.0, 20.0
 """The paper's bounds on the convection time constant per unit distance [s/m]."""
@@ -274,7 +274,7 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
              gains: str = "arrivals", gain_noise: float | None = None,
              neighbour_noise: float = 0.0, hide: int = 0,
              floor_above: bool = False, fd_nodes: int = FD_NODES,
-             progress=None) -> TestbedResult:
+             internal_mass=None, progress=None) -> TestbedResult:
     """Simulate a building with known convection edges operated by a VAV BAS.
 
     Parameters
@@ -345,6 +345,11 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         Put a measured floor above the layout (:func:`family.add_floor_above`).
     fd_nodes : int
         Finite volumes per wall layer of ``plant="fd"``.
+    internal_mass : float or dict, optional
+        Mass the spec omits: the plant's zone capacitance is this factor [-] (>= 1) times
+        the published spec's (one number for every zone, or ``{zone: factor}``); the spec
+        returned keeps the published value, ``truth.details["zone_capacitance"]`` holds
+        the plant's. Every plant (``rc``, ``rc-exact``, ``fd``) uses it. Default: none.
     progress : callable, optional
         ``progress(done, total)`` called as the simulation advances (control steps).
 
@@ -397,7 +402,7 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
                                 ("gains", gains), ("gain_noise", gain_noise),
                                 ("neighbour_noise", neighbour_noise),
                                 ("hide", hide), ("floor_above", floor_above),
-                                ("fd_nodes", fd_nodes))
+                                ("fd_nodes", fd_nodes), ("internal_mass", internal_mass))
               if v != _FAMILY_DEFAULTS[k]}
     # the family's draws come from their own stream: the default buildings stay bit-for-bit
     rng_family = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(24,)))
@@ -411,7 +416,9 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         layout, spec, wall_draws = random_walls(layout, rng_family, wall_spec)
     else:
         spec = layout.spec
-    net = ThermalNetwork(layout.spec, layout.edges)
+    plant_spec = layout.spec if internal_mass is None else _with_internal_mass(layout.spec,
+                                                                              internal_mass)
+    net = ThermalNetwork(plant_spec, layout.edges)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v)
     p = model.p  # validates rbar_v / c_v against the number of edges
 
@@ -530,6 +537,24 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
              days, _time.perf_counter() - t_start)
     return TestbedResult(spec, data, truth, net, model, gains, X, U,
                          dist.window(n_burn), layout, ctrl, settings, bias)
+
+
+def _with_internal_mass(spec: BuildingSpec, factor) -> BuildingSpec:
+    """``spec`` with zone capacitances times ``factor`` (a number or ``{zone: factor}``)."""
+    names = spec.zone_names
+    if isinstance(factor, dict):
+        bad = sorted(set(factor) - set(names))
+        if bad:
+            raise SpecError(f"internal_mass: {bad} are not zones ({names})")
+        f = {z: _check(f"internal_mass[{z}]", v, "[-]") for z, v in factor.items()}
+    else:
+        f = dict.fromkeys(names, _check("internal_mass", factor, "[-]"))
+    low = {z: v for z, v in f.items() if v < 1.0}
+    if low:
+        raise SpecError(f"internal_mass must be >= 1 (mass added to the spec's), found {low}")
+    zones = tuple(replace(z, capacitance=f[z.name] * spec.zone_capacitance(z.name))
+                  if z.name in f else z for z in spec.zones)
+    return replace(spec, zones=zones)
 
 
 def _plain(v):
