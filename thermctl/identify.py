@@ -769,7 +769,7 @@ def _greybox_meta(gb, ida) -> dict:
                                 and not (k == "rbar_v" and getattr(ida, "paths_disagree",
                                                                    None))}
                             for k, iv in ida.intervals.items()
-                            if k.startswith(("rbar_v", "tau0"))}
+                            if ConvectionParameters.kind_of(k) in ("rbar_v", "tau0")}
         out["verdicts"] = dict(ida.verdicts)
     return out
 
