@@ -57,7 +57,7 @@ class LikelihoodScorer:
         ``on_fit(n)`` after each full fit (``n`` so far): a heartbeat for long searches.
     min_t : float
         Consistency an air path's gain must show (:meth:`consistent`): the t statistic of
-        its daily likelihood gains [-]; 0 turns the test off.
+        its daily likelihood gains [-]; 0: reported, not required.
     block : float
         Length of the blocks of that test [s] (a day: the gains' own period).
     **estimator_kwargs
@@ -144,7 +144,7 @@ class LikelihoodScorer:
         note : str
             A few words for the selection path.
         """
-        if self.min_t <= 0 or self.test is not None:
+        if self.test is not None:
             return True, float("nan"), ""
         with single_thread_blas():
             ids_s, ls = small.problem_.block_nll(small.eta_, self.block)
@@ -157,8 +157,9 @@ class LikelihoodScorer:
         sd = float(np.std(g, ddof=1))
         t = math.inf if sd == 0.0 else float(np.mean(g)) / (sd / math.sqrt(D))
         wins = int(np.sum(g > 0))
-        return (t >= self.min_t, t,
-                f"daily gain t {t:.1f} (needs {self.min_t:g}), better on {wins} of {D} days")
+        need = f" (needs {self.min_t:g})" if self.min_t > 0 else ""
+        return (self.min_t <= 0 or t >= self.min_t, t,
+                f"daily gain t {t:.1f}{need}, better on {wins} of {D} days")
 
     def describe(self, c, fitted) -> str:
         """One line on air path ``c`` in ``fitted``."""
