@@ -31,6 +31,9 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(structure=StructureOptions(level=1.5)), "structure.level"),
     (IdentifyOptions(estimation=EstimationOptions(intervals="bootstrap")),
      "estimation.intervals"),
+    (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", internal_mass=True)),
+     "internal_mass needs a Kalman criterion"),
+    (IdentifyOptions(selection=SelectionOptions(min_t=-1.0)), "selection.min_t"),
 ])
 def test_check_rejects_bad_and_contradictory_options_in_one_line(opt, match):
     with pytest.raises(DataError, match=match) as exc:
@@ -105,3 +108,31 @@ def test_disagreeing_paths_withdraw_identified_on_finite_volume_walls():
     assert iv.lower <= lo and iv.upper >= hi
     assert "not identified as one value" in ida.verdicts["rbar_v"]
     assert not ident.model.meta["greybox"]["intervals"]["rbar_v"]["identifiable"]
+
+
+@pytest.mark.slow
+def test_identify_carries_the_fitted_internal_mass_into_the_model():
+    """`identify` with ``internal_mass``: a plant with 3× the published zone capacitances
+    (every row fitted, as on a building whose supply never stops) gives a model whose
+    zones are heavier than the spec's, and the conduction model alone says so."""
+    import warnings
+
+    import numpy as np
+
+    from thermctl.data import read_measurements
+    from thermctl.identify import identify
+    from thermctl.testbed import generate
+    opt = IdentifyOptions(selection=SelectionOptions(method="scores"),
+                          estimation=EstimationOptions(internal_mass=True, intervals="none"))
+    ratios = []
+    for mass in (3.0, 1.0):
+        tb = generate("pugh-hall", days=12, seed=1, internal_mass=mass)
+        meas = read_measurements(tb.data, tb.spec, name="tb")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ident = identify(meas, opt)
+        spec = ident.model.network.spec
+        ratios.append(np.median([spec.zone_capacitance(z) / tb.spec.zone_capacitance(z)
+                                 for z in tb.spec.measured_zones]))
+    heavy, plain = ratios
+    assert 2.0 < heavy < 6.0 and plain < 2.0, ratios

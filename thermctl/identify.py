@@ -140,6 +140,11 @@ class EstimationOptions:
     grid : bool
         ``criterion="simulation"``: also run the grid (the reference, and the J-vs-R̄_v
         figure).
+    internal_mass : bool
+        Kalman criteria: a fitted capacity factor per measured zone (internal mass the
+        spec omits; :class:`~thermctl.estimate.likelihood.LikelihoodOptions`). It needs
+        rows with known heat inputs: with the supply-off rows of a closed-loop building it
+        only shapes the noise (docs/identification.md, "Internal mass").
     """
 
     criterion: str = "likelihood"
@@ -149,9 +154,13 @@ class EstimationOptions:
     window_hours: float = 12.0
     initial_state: str = "paper"
     grid: bool = True
+    internal_mass: bool = False
 
     def check(self):
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
+        if self.internal_mass and self.criterion == "simulation":
+            raise DataError("identify option estimation.internal_mass needs a Kalman criterion "
+                            "(likelihood or kstep), not 'simulation'")
         _one_of("estimation", "intervals", self.intervals, ("profile", "wald", "none"))
         _one_of("estimation", "estimator", self.estimator,
                 ("nlp", "single_shooting", "grid", "none"))
@@ -415,6 +424,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     meta = _meta(meas, cal, val, opt, scores)
     if gb is not None:
         meta["greybox"] = _greybox_meta(gb, ida)
+        net = _fitted_network(gb)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v, meta=meta)
     return Identification(model, sid, est, grid, cal, val, opt, notes, greybox=gb, intervals=ida)
 
@@ -486,7 +496,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
                                    margin=opt.selection.margin, progress=say, on_fit=on_fit,
                                    min_t=opt.selection.min_t,
                                    start=start or (), final_criterion=opt.estimation.criterion,
-                                   solar=opt.estimation.solar)
+                                   solar=opt.estimation.solar, **_mass_options(opt))
         net = ThermalNetwork(spec, sel.edges)
         if not sel.edges:
             notes.append("the data support no convection edge: the model is conduction-only")
@@ -506,6 +516,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
                              "reasons": sel.reasons}
     if gb is not None:
         meta["greybox"] = _greybox_meta(gb, ida)
+        net = _fitted_network(gb)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v, meta=meta)
     return Identification(model, sid, None, None, cal, val, opt, notes, selection=sel,
                           greybox=gb, intervals=ida)
@@ -519,6 +530,7 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     li = identify_local(meas.spec, cal.frame, rule=opt.split.combine,
                         criterion=opt.selection.criterion, margin=opt.selection.margin,
                         solar=opt.estimation.solar, workers=opt.split.workers,
+                        internal_mass=opt.estimation.internal_mass,
                         client=client or opt.split.scheduler, progress=progress,
                         fit_rows=opt.split.rows, latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
@@ -570,7 +582,7 @@ def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
     meta["selection"] = {"path": [], "reasons": li.reasons}
     if gb is not None:
         meta["greybox"] = _greybox_meta(gb, ida)
-        model = ThermalModel(net, rbar_v=gb.rbar_v_, c_v=gb.c_v_, meta=meta)
+        model = ThermalModel(_fitted_network(gb), rbar_v=gb.rbar_v_, c_v=gb.c_v_, meta=meta)
     else:
         model = li.model(spec, meta=meta)
     return Identification(model, None, None, None, cal, val, opt, notes, selection=None,
@@ -635,6 +647,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         results = run_local(problems, frames, workers=opt.split.workers, client=client,
                             progress=progress, criterion=opt.selection.criterion,
                             margin=opt.selection.margin, solar=opt.estimation.solar,
+                            internal_mass=opt.estimation.internal_mass,
                             fit_rows=opt.split.rows, min_t=opt.selection.min_t) if problems else []
         wall = _time.perf_counter() - t0
         out = {}
@@ -652,6 +665,18 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             client.close()
 
 
+def _fitted_network(gb):
+    """The likelihood fit's network: with ``internal_mass``, the zones carry f_z·C_z."""
+    return gb.problem_.fitted_network(gb.eta_)
+
+
+def _mass_options(opt) -> dict:
+    """Likelihood options of ``estimation.internal_mass``: the factors and every row, since
+    only rows with known supply heat fix a zone's capacity (on the supply-off rows of the
+    closed-loop testbed the factor drifts to 10–30 with or without extra mass)."""
+    return {"internal_mass": True, "fit_rows": "all"} if opt.estimation.internal_mass else {}
+
+
 def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
     """Grey-box fit of a given structure (``selection="scores"`` with a grey-box criterion,
     or the whole-building refit of local results with ``per_edge``)."""
@@ -659,7 +684,8 @@ def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         gb = LikelihoodEstimator(net, criterion=opt.estimation.criterion,
-                                 solar=opt.estimation.solar, per_edge=per_edge).fit(cal, init=init)
+                                 solar=opt.estimation.solar, per_edge=per_edge,
+                                 **_mass_options(opt)).fit(cal, init=init)
     return gb, _intervals(gb, opt, notes, cal)
 
 

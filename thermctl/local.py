@@ -758,7 +758,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                    client=None, progress=None, parallel: bool = True,
                    fit_rows: str = "all", latent_depth: int | None = 1,
                    candidates: str = "all", level: float = 0.05,
-                   s_min: float = 0.25, min_t: float = 0.0) -> LocalIdentification:
+                   s_min: float = 0.25, min_t: float = 0.0,
+                   **options) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -791,6 +792,9 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     min_t : float
         Daily consistency an air path's gain must show in its local search
         (:meth:`thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`); 0: off.
+    **options
+        Other :class:`thermctl.estimate.likelihood.LikelihoodOptions` fields of the local
+        fits (``internal_mass``...).
 
     Returns
     -------
@@ -808,7 +812,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         problems, _ = propose_sin(problems, frame, level, s_min)
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
                         criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows,
-                        min_t=min_t)
+                        min_t=min_t, **options)
     return assemble(problems, results, rule, margin, time.perf_counter() - t0)
 
 

@@ -89,6 +89,9 @@ def identify(
                                    "forward over all measured pairs) or all."),
     margin: float = typer.Option(_D.selection.margin, help="--selection model: BIC improvement "
                                  "an edge must bring."),
+    internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
+                                       "capacity factor per measured zone (internal mass the "
+                                       "spec omits)."),
     min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model: t "
                                 "statistic of its daily likelihood gains an edge must reach as "
                                 "well (holds under model misfit, unlike BIC); 0: off."),
@@ -176,7 +179,8 @@ def identify(
                                    min_t=min_t),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
-                                     initial_state=initial_state, grid=grid),
+                                     initial_state=initial_state, grid=grid,
+                                     internal_mass=internal_mass),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth),
