@@ -117,6 +117,19 @@ class LinearMPC(RecedingHorizonMPC):
     tariff : bool
         Price energy with the forecasts' :class:`~mpc_examples.common.Tariff`, charge
         the peak electric power and soften the event cap (extra rows and variables).
+    steps : sequence of int, optional
+        A non-uniform prediction grid: the length of each of the ``horizon`` steps in
+        multiples of ``dt`` (default all 1). E.g. ``dt=600, horizon=16,
+        steps=[1] * 6 + [3] * 10``: the first hour in 10-min steps, then 30-min steps to
+        6 h. The forecast's step ``k`` must then cover step ``k`` of this grid
+        (:meth:`mpc_examples.simulator.Scenario.forecast` with ``steps``). Why: PIQP's
+        sparse factorization on the 49-zone floor grows about as N³ with the number of
+        steps (AMD's separators span the whole horizon; measured 4.0 s CPU for 36 steps,
+        0.34 s for this grid), while the applied input comes from the first steps: on the
+        7-zone warm-up it is the uniform grid's to 3e-5 K (supply temperature), and 8 h
+        closed loop use the same energy to 0.002 % (docs/mpc.md). Coarse steps from 30 min
+        on moved the 06:20 reheat by up to 17 K: keep the first hour fine. The tail is
+        costed and constrained at its own steps (the band at each step's end only).
 
     Examples
     --------
@@ -127,18 +140,26 @@ class LinearMPC(RecedingHorizonMPC):
     def __init__(self, model: ThermalModel, hvac: HVACModel, comfort_zones, dt: float = 900.0,
                  horizon: int = 24, solver: str = "piqp", weights: LinearWeights = LinearWeights(),
                  iterations: int = 1, T_c0: float = 12.8, transcription: str = "zoh",
-                 tariff: bool = False):
+                 tariff: bool = False, steps=None):
         if int(iterations) != iterations or iterations < 1:
             raise ValueError(f"iterations must be a positive integer, found {iterations!r}")
         if transcription not in TRANSCRIPTIONS:
             raise ValueError(f"transcription must be one of {TRANSCRIPTIONS}, found {transcription!r}")
         super().__init__(model, hvac, comfort_zones, dt, horizon, weights)
+        steps = np.ones(self.N, int) if steps is None else np.asarray(steps)
+        if steps.shape != (self.N,) or np.any(steps < 1) or np.any(steps != np.round(steps)):
+            raise ValueError(f"steps must be {self.N} positive integers, found {steps!r}")
+        self.steps = steps.astype(int)
+        self.h = self.dt * self.steps   # [s] length of each prediction step
         self.iterations = int(iterations)
         self.solver_name = solver
         self.transcription = transcription
         self.tariff = bool(tariff)
         t0 = time.perf_counter()
-        self.systems = {on: self._export(on, T_c0) for on in (True, False)}
+        # the step rows of each mode and step length; ``systems[on]``: those of the first step
+        self.grid_systems = {(on, int(m)): self._export(on, T_c0, m * self.dt)
+                             for on in (True, False) for m in np.unique(self.steps)}
+        self.systems = {on: self.grid_systems[on, self.steps[0]] for on in (True, False)}
         self.stages = self.systems[True]["L"].shape[0] // model.network.n_states
         self._unify()
         self._qp = self._pattern = None
@@ -147,7 +168,7 @@ class LinearMPC(RecedingHorizonMPC):
         self.build_time = time.perf_counter() - t0
 
     # ---- the step rows at the two base flows ---------------------------------
-    def _export(self, on: bool, T_c0: float) -> dict:
+    def _export(self, on: bool, T_c0: float, h: float) -> dict:
         """``L x+ = A x + B_Ts Ts + B_T T_b + B_Q Q + c`` at the mode's base flow.
 
         ``zoh``: the exported discrete ``StateSpace`` (``L = I``); the others: the step rows
@@ -156,11 +177,11 @@ class LinearMPC(RecedingHorizonMPC):
         net = self.model.network
         m_lo = np.asarray(self.hvac.ms_min, float) if on else np.zeros(net.n_zones)
         if self.transcription != "zoh":
-            r = step_rows(at_flow(self.model, m_lo), self.dt, self.transcription)
+            r = step_rows(at_flow(self.model, m_lo), h, self.transcription)
             return {"L": r.L, "A": r.N, "B_Ts": r.B_Ts, "B_T": r.B_T, "B_Q": r.B_Q,
                     "c": np.zeros(r.L.shape[0]), "ms": m_lo}
         op = self.model.operating_point(ms=dict(zip(self.zones, m_lo)), Ts=T_c0, T=15.0, Q=0.0)
-        sys = self.model.to_statespace(op, dt=self.dt)
+        sys = self.model.to_statespace(op, dt=h)
         labels = list(sys.input_labels)
         cols = {g: [labels.index(f"{g}[{n}]") for n in names]
                 for g, names in (("Ts", self.zones), ("T", net.boundary), ("Q", self.zones))}
@@ -173,21 +194,22 @@ class LinearMPC(RecedingHorizonMPC):
                 "B_Q": B[:, cols["Q"]], "c": c, "ms": m_lo, "sys": sys, "op": op}
 
     def _unify(self):
-        """Triplets of ``L``, ``A`` and ``B_Q E`` on one pattern for both modes (explicit
-        zeros kept), so the QP's sparsity never changes and one solver serves every step."""
+        """Triplets of ``L``, ``A`` and ``B_Q E`` on one pattern for both modes and every
+        step length (explicit zeros kept), so the QP's sparsity never changes and one
+        solver serves every step."""
         nz, ns = len(self.zones), len(self.sup)
         E = sparse.lil_matrix((nz, self.NU * ns))   # u_k [kW] → heat per zone [W]
         for j, sign in enumerate((1e3, 1e3, -1e3)):
             E[self.sup, j * ns + np.arange(ns)] = sign
         E = sparse.csr_matrix(E)
-        on, off = self.systems[True], self.systems[False]
-        for s in (on, off):
+        systems = list(self.grid_systems.values())
+        for s in systems:
             s["G"] = sparse.csr_matrix(s["B_Q"]) @ E
         for key in ("L", "A", "G"):
-            Ma, Mb = sparse.csr_matrix(on[key]), sparse.csr_matrix(off[key])
-            P = (abs(Ma) + abs(Mb)).tocoo()
+            Ms = [sparse.csr_matrix(s[key]) for s in systems]
+            P = sum(abs(M) for M in Ms).tocoo()
             r, c = P.row, P.col
-            for s, M in ((on, Ma), (off, Mb)):
+            for s, M in zip(systems, Ms):
                 s[key + "_t"] = (r, c, np.asarray(M[r, c]).ravel())
 
     # ---- QP (sparse: states stay decision variables) -----------------------------
@@ -237,7 +259,8 @@ class LinearMPC(RecedingHorizonMPC):
         N, ns, nc = self.N, len(self.sup), len(self.comfort_idx)
         L = self._layout()
         nu, nx, n = L["nu"], L["nx"], L["n"]
-        cp, dth = hv.cp, self.dt / 3600.0
+        cp = hv.cp
+        dth = self.h / 3600.0   # [h] per step
         nz = len(self.zones)
         T_c, T_o = np.asarray(fc.T_c[:N], float), np.asarray(fc.T_out[:N], float)
         on = np.asarray(fc.hvac_on[:N], bool)
@@ -271,7 +294,7 @@ class LinearMPC(RecedingHorizonMPC):
         ix = lambda k: iw(k) + nw - nx            # noqa: E731  (x_k, k = 1..N)
         fan_c = []
         for k in range(N):
-            sysd = self.systems[bool(on[k])]
+            sysd = self.grid_systems[bool(on[k]), self.steps[k]]
             e = (sysd["B_Q"] @ fc.gains[k] + sysd["B_Ts"] @ np.full(nz, T_c[k])
                  + sysd["B_T"] @ fc.T_boundary[k] + sysd["c"])
             e = np.asarray(e).ravel()
@@ -289,8 +312,8 @@ class LinearMPC(RecedingHorizonMPC):
             row += nw
             # reheat: 1 per kW at base flow, kappa per kW of hot air (linear)
             o = iu(k)
-            g[o: o + ns] += dth * p_ht[k] / hv.eta_heat
-            g[o + ns: o + 2 * ns] += dth * p_ht[k] * kappa[:, k] / hv.eta_heat
+            g[o: o + ns] += dth[k] * p_ht[k] / hv.eta_heat
+            g[o + ns: o + 2 * ns] += dth[k] * p_ht[k] * kappa[:, k] / hv.eta_heat
             # extra flow MF_k = f·u_k; fan: 2nd-order Taylor of P0 (m/md)³ at m_pred
             f = np.concatenate([a_x[:, k], a_c[:, k]])
             put(np.full(2 * ns + 1, row), np.r_[L["MF"] + k, o + ns + np.arange(2 * ns)],
@@ -299,7 +322,7 @@ class LinearMPC(RecedingHorizonMPC):
             row += 1
             m0, mb = base[:, k].sum(), m_pred[k]
             c1, c2 = 3 * P0 * mb ** 2 / md ** 3, 3 * P0 * mb / md ** 3
-            g[L["MF"] + k] += dth * p_el[k] * (c1 + 2 * c2 * (m0 - mb))
+            g[L["MF"] + k] += dth[k] * p_el[k] * (c1 + 2 * c2 * (m0 - mb))
             fan_c.append((c1, c2, P0 * (mb / md) ** 3 + c1 * (m0 - mb)))  # fan ≈ c + c1 MF
             # coil split: CC − CH − coil = const [kW]; the base flow sees the zone state at
             # the step's start, the extra flow the LTV temperature
@@ -317,8 +340,8 @@ class LinearMPC(RecedingHorizonMPC):
             put(np.full(len(cols), row), cols, vals)
             bounds(c0, c0, 1)
             row += 1
-            g[L["CC"] + k] += dth * p_el[k] / hv.cop_cool
-            g[L["CH"] + k] += dth * p_ht[k] / hv.eta_heat
+            g[L["CC"] + k] += dth[k] * p_el[k] / hv.cop_cool
+            g[L["CH"] + k] += dth[k] * p_ht[k] / hv.eta_heat
             # electric power (fan linearised + chiller): PK ≥ it; above the cap costs EX
             c1, _, cf = fan_c[-1]
             if self.tariff:
@@ -344,7 +367,7 @@ class LinearMPC(RecedingHorizonMPC):
             put(np.repeat(row + nc + j, 2), np.column_stack([xz, sc]), np.tile([1.0, -1.0], nc))
             bounds(-np.inf, fc.hi[k], nc)
             row += 2 * nc
-        g[L["S"]:L["CC"]] += dth * w.comfort_linear
+        g[L["S"]:L["CC"]] += np.repeat(dth, nc) * w.comfort_linear
         if self.tariff:
             if tf is None:
                 raise ValueError("a LinearMPC built with tariff=True needs forecasts with a tariff")
@@ -354,10 +377,10 @@ class LinearMPC(RecedingHorizonMPC):
         # H: comfort (quadratic), fan (on MF), moves λ Σ ||u_k − u_{k−1}||², u_{−1} = now
         Hr, Hc, Hv = [], [], []
         sl = np.arange(L["S"], L["CC"])
-        Hr.append(sl), Hc.append(sl), Hv.append(np.full(nc * N, dth * 2 * w.comfort_quadratic))
+        Hr.append(sl), Hc.append(sl), Hv.append(np.repeat(dth, nc) * 2 * w.comfort_quadratic)
         mf = L["MF"] + np.arange(N)
         Hr.append(mf), Hc.append(mf)
-        Hv.append(np.array([dth * p_el[k] * 2 * fan_c[k][1] for k in range(N)]))
+        Hv.append(np.array([dth[k] * p_el[k] * 2 * fan_c[k][1] for k in range(N)]))
         diag = np.full(nu * N, 4.0 * w.move)
         diag[-nu:] = 2.0 * w.move
         Hr.append(np.arange(nu * N)), Hc.append(np.arange(nu * N)), Hv.append(diag)

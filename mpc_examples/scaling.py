@@ -24,6 +24,10 @@ rows), each with the QP solvers asked for; for the economic NMPC the implicit Ra
 ``--max-dense-nnz`` nonzeros is listed with that count and not built (the 200-zone ZOH
 QP: 36 · 2 348² ≈ 2·10⁸ nonzeros, 1.6 GB of values alone).
 
+``--grid`` gives the linear MPC a non-uniform prediction grid (:class:`LinearMPC` ``steps``):
+fine steps first, where the applied input is decided, long ones after; the forms are then
+labelled e.g. ``euler 6x10+10x30min``.
+
 Wall times include whatever else runs on the machine; CPU time is the process's own
 (single-threaded: set ``OMP_NUM_THREADS=1``).
 """
@@ -61,13 +65,14 @@ def state_feedback_run(scn, mpc, to_model_state, n_solves: int):
     failures : int
     """
     plant = scn.plant()
-    every = int(round(mpc.dt / scn.dt))
+    every = int(round(mpc.dt / scn.dt))   # plant steps per control step (the grid's first)
+    steps = getattr(mpc, "steps", None)    # a LinearMPC's non-uniform prediction grid
     sup = scn.hvac.supplied
     nz = len(scn.tb.network.zones)
     wall, cpu, fails = [], [], 0
     for j in range(n_solves):
         meas = plant.measure()
-        fc = scn.forecast(j * every, mpc.N, every, np.zeros(nz), meas.T_ahu)
+        fc = scn.forecast(j * every, mpc.N, every, np.zeros(nz), meas.T_ahu, steps=steps)
         sol = mpc.solve(to_model_state(plant.x), fc)
         wall.append(sol.solve_time)
         cpu.append(sol.cpu_time)
@@ -114,18 +119,58 @@ def _row(kind, form, solver, zones, name, model, **kw):
     return r
 
 
+def parse_grid(spec, step: float, horizon: float):
+    """Step multiples of a prediction grid from ``"3x1 11x3"`` (three steps of 1·``step``,
+    then eleven of 3·``step``); ``None`` or ``"uniform"``: all 1. Must sum to the horizon.
+
+    Parameters
+    ----------
+    spec : str or None
+    step : float
+        Control step [min].
+    horizon : float
+        [h]
+    """
+    n = int(round(horizon * 60.0 / step))
+    if spec in (None, "", "uniform"):
+        return None
+    steps = []
+    for part in spec.replace(",", " ").split():
+        k, _, m = part.partition("x")
+        steps += [int(m)] * int(k) if m else [int(k)]
+    if sum(steps) != n:
+        raise ValueError(f"grid {spec!r} covers {sum(steps)} steps of {step:g} min, the "
+                         f"horizon {n}")
+    return steps
+
+
+def _grid_label(steps, step):
+    """``"3x10+11x30min"`` for ``[1, 1, 1, 3, ..., 3]`` at a 10-min step."""
+    out, k = [], 0
+    while k < len(steps):
+        j = k
+        while j < len(steps) and steps[j] == steps[k]:
+            j += 1
+        out.append(f"{j - k}x{steps[k] * step:g}")
+        k = j
+    return "+".join(out) + "min"
+
+
 def _measure(kind, form, solver, scn, name, model, to_x, args):
-    N = int(round(args.horizon * 60.0 / args.step))
+    steps = parse_grid(args.grid, args.step, args.horizon) if kind == "linear" else None
+    N = int(round(args.horizon * 60.0 / args.step)) if steps is None else len(steps)
     zones = len(scn.tb.network.zones)
     nx = model.network.n_states
-    if kind == "linear" and form == "zoh" and N * nx * nx > args.max_dense_nnz:
+    if steps is not None:
+        form = f"{form} {_grid_label(steps, args.step)}"
+    if kind == "linear" and form.split()[0] == "zoh" and N * nx * nx > args.max_dense_nnz:
         nnz = N * nx * nx
         return _row(kind, form, solver, zones, name, model, nonzeros=float(nnz),
                     note=f"not built: dense A_k, {nnz / 1e6:.0f} M nonzeros")
     t0 = time.perf_counter()
     if kind == "linear":
         mpc = LinearMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
-                        solver=solver, transcription=form)
+                        solver=solver, transcription=form.split()[0], steps=steps)
     else:
         mpc = EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
                           transcription=form)
@@ -167,6 +212,10 @@ def main(argv=None):
     p.add_argument("--start-hour", type=float, default=6.0)
     p.add_argument("--step", type=float, default=10.0, help="MPC step [min]")
     p.add_argument("--horizon", type=float, default=6.0, help="prediction horizon [h]")
+    p.add_argument("--grid", default=None,
+                   help="linear MPC: non-uniform prediction grid in multiples of --step, e.g. "
+                        "'6x1 10x3' (an hour of 10-min steps, then 30-min steps to 6 h: 16 "
+                        "instead of 36 steps); the control step stays --step")
     p.add_argument("--per-zone", type=int, nargs="*", default=[3],
                    help="states per zone of the structured reductions")
     p.add_argument("--max-dense-nnz", type=float, default=2e7,

@@ -84,26 +84,29 @@ class Scenario:
         return Plant(tb.model, d, x0=tb.states[self.k0 // r], sensor_sd=noise.get("T_sd", 0.0),
                      sensor_bias=tb.sensor_bias, seed=tb.truth.seed + seed)
 
-    def forecast(self, k: int, N: int, every: int, gains, T_c: float) -> Forecast:
+    def forecast(self, k: int, N: int, every: int, gains, T_c: float, steps=None) -> Forecast:
         """What the MPC knows at plant step ``k`` of the run for ``N`` steps of ``every`` plant steps.
 
         Boundary temperatures: the logged values, averaged over each MPC step (perfect
         forecast of what the BAS records). Gains: ``gains`` [W] per zone held (the
         Kalman filter's estimate). Cold deck: the current reading held. Comfort band at the end of
-        each step; occupied mode at its start.
+        each step; occupied mode at its start. ``steps`` (N ints, optional): a non-uniform
+        grid, step ``j`` lasting ``steps[j] · every`` plant steps (``LinearMPC(steps=...)``).
         """
         d = self.tb.disturbances
         a = self.k0 + k
-        idx = a + np.arange(N * every)
-        if idx[-1] >= len(d):
-            raise ValueError(f"the testbed's disturbances end {idx[-1] - len(d) + 1} plant steps "
+        lengths = every * (np.ones(N, int) if steps is None else np.asarray(steps, int))
+        ends = np.cumsum(lengths)
+        starts = ends - lengths
+        if a + ends[-1] - 1 >= len(d):
+            raise ValueError(f"the testbed's disturbances end {a + ends[-1] - len(d)} plant steps "
                              "before the horizon does: generate more days")
-        Tb = d.T_boundary_logged[idx].reshape(N, every, -1).mean(axis=1)
+        Tb = np.add.reduceat(d.T_boundary_logged[a: a + ends[-1]], starts, axis=0) / lengths[:, None]
         out = d.boundary.index(_outdoor(d.boundary))
-        lo, hi = self.band.bounds(d.time[a + every * np.arange(1, N + 1)])
+        lo, hi = self.band.bounds(d.time[a + ends])
         return Forecast(T_boundary=Tb, gains=np.tile(np.asarray(gains, float), (N, 1)),
                         T_out=Tb[:, out], T_c=np.full(N, float(T_c)),
-                        hvac_on=np.asarray(d.occupied[a + every * np.arange(N)]), lo=lo, hi=hi)
+                        hvac_on=np.asarray(d.occupied[a + starts]), lo=lo, hi=hi)
 
 
 def _outdoor(boundary):
@@ -258,7 +261,8 @@ def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.35,
                 kf.predict(u_sum / every)
                 kf.update(meas.T)
                 u_sum[:] = 0.0
-            fc = scn.forecast(k, mpc.N, every, kf.gains_all_zones(), meas.T_ahu)
+            fc = scn.forecast(k, mpc.N, every, kf.gains_all_zones(), meas.T_ahu,
+                              steps=getattr(mpc, "steps", None))
             fc.lo, fc.hi = fc.lo + backoff, fc.hi - backoff
             sol = mpc.solve(kf.x, fc)
             times.append(sol.solve_time)

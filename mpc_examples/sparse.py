@@ -197,14 +197,23 @@ def radau_row_scale(dyn: LinearDynamics, h: float) -> np.ndarray:
     return 1.0 / abs(L).max(axis=1).toarray().ravel()
 
 
-def eliminate_fast_edges(model, op, error: bool = True, max_error_states: int = 800):
-    """The model with its convection-edge states held quasi-static (singular perturbation).
+def eliminate_fast_edges(model, op, error: bool = True, max_error_states: int = 800,
+                         tau: float | None = None):
+    """The model with its fast edge states held quasi-static (singular perturbation).
 
     Parameters
     ----------
     model : ThermalModel
     op : OperatingPoint
         Where the reduction's error is measured (the reduced network holds at every flow).
+    tau : float, optional
+        Also eliminate every wall edge whose slowest time constant (both ends held) is
+        below ``tau`` [s] (:func:`thermctl.reduce.kron`); default: the convection edges
+        only. An edge touches two nodes, so either way the result couples only nodes
+        the edge joined: no fill-in. On the 49-zone floor (windows 0.20 h, hall walls
+        0.31 h, partitions 0.39 h, measured): ``tau=1000`` drops the windows (661 -> 537
+        states, step error 1.8 % at 1 h, one QP 3.7 s CPU instead of 4.0);
+        ``tau=1500`` also the partitions (349 states, 25 % at 1 h, 2.6 s): not worth it.
     error : bool
         Measure the step-response error against the full model (heat into each zone and
         boundary temperatures to every zone temperature, 1 / 6 / 24 h,
@@ -223,7 +232,7 @@ def eliminate_fast_edges(model, op, error: bool = True, max_error_states: int = 
     from thermctl.reduce import Reference, kron, linearize
 
     t0 = time.perf_counter()
-    red = kron(model, op)
+    red = kron(model, op, tau=tau)
     rnet = red.network
     K = np.asarray(rnet.K, float)
     scale = np.abs(K).max(axis=1, keepdims=True)

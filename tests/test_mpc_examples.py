@@ -562,3 +562,57 @@ def test_demand_response_example(tmp_path):
     assert true["failures"] == 0
     assert true["event excess [kWh]"] < base["event excess [kWh]"]
     assert true["cost [$]"] < base["cost [$]"]
+
+
+def test_coarse_tail_grid_same_first_input():
+    """The linear MPC on the 7-zone testbed (Pugh Hall, true model, euler rows, PIQP) with a
+    non-uniform prediction grid — the first hour in 10-min steps, then 30-min steps to 6 h
+    (16 steps) — against the uniform 36 × 10-min grid: two problems, not one, that must give
+    the same applied input. Three state-feedback steps of the Monday warm-up from 06:00,
+    where the boxes reheat (up to the 32 °C limit). Measured: flows 1e-10 kg/s apart, supply
+    temperatures 3e-5 K, the predicted zone temperatures after 10 min 1e-6 K (over eight
+    steps); the tolerances are 100× that or more. (Starting the 30-min steps after 30 min
+    instead moves the 06:20 reheat by up to 17 K: the first hour must stay fine.)"""
+    from mpc_examples.simulator import make_scenario
+
+    scn = make_scenario(7, 0, 0.5, 6.0, start_day=3, start_hour=6.0)
+    nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
+    grid = [1] * 6 + [3] * 10
+    mpcs = [LinearMPC(scn.tb.model, scn.hvac, scn.comfort_zones, dt=600.0, horizon=len(s),
+                      transcription="euler", steps=s) for s in ([1] * 36, grid)]
+    assert mpcs[1].n_variables < 0.5 * mpcs[0].n_variables
+    plant = scn.plant()
+    reheat = 0.0
+    for j in range(3):
+        meas = plant.measure()
+        sols = [m.solve(plant.x, scn.forecast(10 * j, m.N, 10, np.zeros(nz), meas.T_ahu,
+                                              steps=m.steps)) for m in mpcs]
+        assert all(s.success for s in sols)
+        np.testing.assert_allclose(sols[1].ms[0], sols[0].ms[0], atol=1e-6)       # [kg/s]
+        np.testing.assert_allclose(sols[1].Ts[0][sup], sols[0].Ts[0][sup], atol=5e-3)  # [°C]
+        np.testing.assert_allclose(sols[1].X[1][:nz], sols[0].X[1][:nz], atol=1e-4)    # [°C]
+        reheat = max(reheat, float(np.max(sols[0].Ts[0][sup] - meas.T_ahu)))
+        ms = np.zeros(nz)
+        ms[sup] = sols[0].ms[0][sup]
+        Ts = np.full(nz, meas.T_ahu)
+        Ts[sup] = np.maximum(sols[0].Ts[0][sup], meas.T_ahu)
+        for _ in range(10):
+            plant.step(ms, Ts)
+    assert reheat > 10.0   # not two idle plans agreeing at their bounds
+
+
+def test_forecast_on_a_grid_averages_the_fine_one():
+    """Scenario.forecast on a non-uniform grid: boundary temperatures the mean of the 10-min
+    forecast's over each long step, the band at each step's end, the mode at its start."""
+    from mpc_examples.simulator import make_scenario
+
+    scn = make_scenario(7, 0, 0.5, 6.0, start_day=3, start_hour=6.0)
+    nz = len(scn.tb.network.zones)
+    fine = scn.forecast(0, 36, 10, np.zeros(nz), 13.0)
+    grid = [1] * 6 + [3] * 10
+    coarse = scn.forecast(0, 16, 10, np.zeros(nz), 13.0, steps=grid)
+    np.testing.assert_allclose(coarse.T_boundary[:6], fine.T_boundary[:6])
+    np.testing.assert_allclose(coarse.T_boundary[6:],
+                               fine.T_boundary[6:].reshape(10, 3, -1).mean(axis=1))
+    np.testing.assert_array_equal(coarse.lo[6:], fine.lo[8::3])
+    np.testing.assert_array_equal(coarse.hvac_on[6:], fine.hvac_on[6::3])
