@@ -111,6 +111,25 @@ class LikelihoodOptions:
         Bounds of the capacity factors [-]: 1 (the spec's capacitance is a lower bound) to
         100 (the twin house's 0.93 MJ/K column is 40× the kitchen's 23 kJ/K of air; with
         30 its corridor sat on the bound).
+    wall_factors : bool
+        A fitted UA factor per wall class, ``ua_factor[exterior]``, ``ua_factor[partition]``,
+        ``ua_factor[boundary]`` (only the classes the network has): walls of uncertain
+        construction, for a user who knows the floor plan but not the U-values. Classes
+        (:func:`.problem.wall_class`): ``exterior`` = a wall to an outdoor boundary node
+        (:func:`thermctl.spec.is_outdoor`), ``partition`` = between two zones,
+        ``boundary`` = to any other boundary node (cellar, attic, a neighbour's space, the
+        floor above). A factor f multiplies the conductance 1/R of all three resistances
+        of every wall of its class (``R → R/f``); the wall capacities are kept. Why UA and
+        not C: the data see a wall mainly through its steady conductance (the zones'
+        response to the outdoor and neighbour temperatures over days), while its two
+        capacities act on the hours-scale shape of that response and trade off against the
+        zone capacity factor and the gain noise; and the spec's C (area × thickness ×
+        ρc) is known better than its U (insulation, thermal bridges, air leaks). Scaling
+        all three R keeps the wall's internal resistance split, so a uniform f leaves its
+        steady-state temperature profile unchanged. Optimised in ``log f`` within
+        ``ua_factor_bounds``, start 1 (the spec).
+    ua_factor_bounds : (float, float)
+        Bounds of the UA factors [-].
     """
 
     per_edge: bool = False
@@ -139,6 +158,8 @@ class LikelihoodOptions:
     holdoff: float = 3 * 3600.0
     internal_mass: object = False
     cap_factor_bounds: tuple = (1.0, 100.0)
+    wall_factors: bool = False
+    ua_factor_bounds: tuple = (0.2, 5.0)
 
     def check(self):
         if self.riccati not in ("implicit", "doubling"):
@@ -164,5 +185,11 @@ class LikelihoodOptions:
         lo, hi = self.cap_factor_bounds
         if not 0 < lo < hi:
             raise EstimationError(f"cap_factor_bounds: need 0 < lower < upper [-], found {lo}, {hi}")
+        if self.wall_factors not in (False, None, True):
+            raise EstimationError(f"wall_factors must be True or False, found {self.wall_factors!r}")
+        lo, hi = self.ua_factor_bounds
+        if not 0 < lo <= 1.0 <= hi or lo == hi:
+            raise EstimationError(f"ua_factor_bounds: need 0 < lower <= 1 <= upper [-] (1: the "
+                                  f"spec's walls), found {lo}, {hi}")
         if not 0 < self.t_min < self.t_max:
             raise EstimationError(f"need 0 < t_min < t_max [s/m], found {self.t_min}, {self.t_max}")

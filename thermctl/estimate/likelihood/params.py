@@ -28,6 +28,7 @@ GROUP_UNITS = {
     "aperture": "m²",
     "gain": "W",
     "cap_factor": "-",
+    "ua_factor": "-",
 }
 """Unit of each parameter group."""
 

@@ -30,7 +30,9 @@ paper's :math:`t_{min}/\alpha \le \tau_0 \le t_{max}/\alpha`), noise intensities
 σ_φ, solar apertures on measured ``solar:`` columns, and coefficients of a time-of-day
 basis of the gains (occupied/unoccupied levels or Fourier terms); with
 ``internal_mass`` a capacity factor f_z >= 1 per measured zone (``C_z → f_z·C_z``: every
-term of the zone's equation, noise included, is divided by f_z).
+term of the zone's equation, noise included, is divided by f_z); with ``wall_factors`` a
+UA factor per wall class (:func:`wall_class`: every conductance of those walls times f,
+``R → R/f``; their capacities kept).
 """
 
 from __future__ import annotations
@@ -54,11 +56,29 @@ from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
 from .options import LikelihoodOptions
 from .params import Param, ParamLayout
 
-__all__ = ["LikelihoodOptions", "LikelihoodProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS"]
+__all__ = ["LikelihoodOptions", "LikelihoodProblem", "T_MIN", "T_MAX", "RBAR_BOUNDS",
+           "WALL_CLASSES", "wall_class"]
 
 log = logging.getLogger(__name__)
 
 _KW = 1e-3                      # gains and heat inputs are in kW inside: states O(0.1–1)
+
+WALL_CLASSES = ("exterior", "partition", "boundary")
+"""Wall classes of ``LikelihoodOptions.wall_factors``, in parameter order."""
+
+
+def wall_class(a: str, b: str, zones) -> str:
+    """Class of a wall between nodes ``a`` and ``b`` (``zones``: the network's zone names).
+
+    ``exterior``: one end is an outdoor boundary node (:func:`thermctl.spec.is_outdoor`);
+    ``partition``: both ends are zones; ``boundary``: one end is another boundary node
+    (cellar, attic, floor above, a neighbour's space).
+    """
+    if is_outdoor(a) or is_outdoor(b):
+        return "exterior"
+    if a in zones and b in zones:
+        return "partition"
+    return "boundary"
 
 
 class LikelihoodProblem:
@@ -117,6 +137,7 @@ class LikelihoodProblem:
         self.alpha = float(opt.alpha if opt.alpha is not None else net.spec.alpha())
         self.tau_bounds = (opt.t_min / self.alpha, opt.t_max / self.alpha)
         self.cap_z = 1.0 / np.asarray(self.sym.inv_cz, dtype=float)
+        self.wall_classes = self._wall_classes()
         self._prepare_inputs()
         self._make_layout(rbar_v, c_v, init or {})
         self._make_chunks()
@@ -170,6 +191,51 @@ class LikelihoodProblem:
         self.basis_rows = names
         self.Bas = np.vstack(rows) if rows else np.zeros((0, N))
         self.Y = Y
+
+    def _wall_classes(self) -> list[str]:
+        """Class of every conduction edge, in network order (:func:`wall_class`).
+
+        A network may override classes with an attribute ``wall_classes`` =
+        ``{edge name: class}`` (a local problem whose neighbour zones are boundary nodes
+        keeps their partitions as ``partition``).
+        """
+        over = getattr(self.network, "wall_classes", None) or {}
+        bad = {k: v for k, v in over.items() if v not in WALL_CLASSES}
+        if bad:
+            raise EstimationError(f"wall_classes: unknown class(es) {bad}; classes are "
+                                  f"{WALL_CLASSES}")
+        zones = set(self.zones)
+        return [over.get(e.name) or wall_class(e.a, e.b, zones)
+                for e in self.network.conduction_edges]
+
+    def _wall_matrices(self, cls: str):
+        """``(A_k, Bt_k)``: the part of the network's ``A`` and ``Bt`` that the walls of
+        class ``cls`` contribute at the spec's resistances (numeric, sparse)."""
+        net = self.network
+        nx, nz = self.n_net, self.nz
+        cap = net.fixed_capacitances()
+        index = {z: i for i, z in enumerate(self.zones)}
+        index.update({b: nx + j for j, b in enumerate(net.boundary)})
+        A = sp.lil_matrix((nx, nx))
+        Bt = sp.lil_matrix((nx, self.nb))
+        wall = iter(self.wall_classes)
+        for k, e in enumerate(net.edges):
+            if e.kind != "conduction":
+                continue
+            if next(wall) != cls:
+                continue
+            s1, s2 = nz + 2 * k, nz + 2 * k + 1
+            for (i, j), r in zip(((index[e.a], s1), (s1, s2), (s2, index[e.b])), e.R):
+                g = 1.0 / r
+                for s, t in ((i, j), (j, i)):
+                    if s >= nx:
+                        continue           # boundary nodes have no equation
+                    A[s, s] -= g / cap[s]
+                    if t < nx:
+                        A[s, t] += g / cap[s]
+                    else:
+                        Bt[s, t - nx] += g / cap[s]
+        return A.tocsc(), Bt.tocsc()
 
     def _boundary_noise_nodes(self):
         rule = self.options.boundary_noise
@@ -310,6 +376,17 @@ class LikelihoodProblem:
             f0 = float(np.clip(2.0, lo_f, hi_f))
             self.i_cf = [lay.add(Param(f"cap_factor[{z}]", "cap_factor", True, f0, lo_f, hi_f))
                          for z in mz]
+        self.i_ua, self.ua_classes, self.ua_mats = [], [], []    # UA factor per wall class
+        if opt.wall_factors:
+            lo_u, hi_u = opt.ua_factor_bounds
+            for cls in WALL_CLASSES:
+                if cls in self.wall_classes:
+                    self.ua_classes.append(cls)
+                    self.i_ua.append(lay.add(Param(f"ua_factor[{cls}]", "ua_factor", True,
+                                                   1.0, lo_u, hi_u)))
+                    self.ua_mats.append(self._wall_matrices(cls))
+            if not self.i_ua:
+                log.info("wall_factors: the network has no wall; no UA factor")
         # linear parameters: entries of Theta (nz × n_basis)
         self.lin = []          # (param index, zone index, basis row)
         for b, (kind, name) in enumerate(self.basis_rows):
@@ -430,6 +507,12 @@ class LikelihoodProblem:
     def _continuous(self, eta):
         n, n_net, nz = self.n, self.n_net, self.nz
         A, Bt = self.sym.AB(self._theta_net(eta))
+        for i, (Ak, Bk) in zip(self.i_ua, self.ua_mats):
+            # the class's walls enter A and Bt linearly in their conductances: f·G_k is
+            # the spec's part plus (f − 1)·G_k (exactly the spec's at f = 1)
+            g = ca.exp(eta[i]) - 1.0
+            A = A + g * ca.DM(Ak)
+            Bt = Bt + g * ca.DM(Bk)
         A = A - ca.DM(sp.diags(self.d_sup).tocsc())
         inv_cz_kw = np.asarray(self.sym.inv_cz, dtype=float) / _KW     # kW → K/s
         Sq = np.zeros((n_net, nz))
@@ -533,6 +616,9 @@ class LikelihoodProblem:
             p = np.zeros(0)
         A, _ = self.sym.AB(p)
         A = np.asarray(ca.densify(A)) - np.diag(self.d_sup)
+        if self.i_ua:      # every class at its largest conductance
+            hi = self.options.ua_factor_bounds[1]
+            A = A + sum((hi - 1.0) * Ak.toarray() for Ak, _ in self.ua_mats)
         return 1.1 * np.abs(A).sum(axis=0).max() * self.data.dt
 
     def _build(self):
@@ -577,14 +663,25 @@ class LikelihoodProblem:
             "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change],
             ["eta"], ["A", "B", "Sigma", "R", "Phi", "Gamma", "Qd", "P", "S", "Kf", "X0",
                       "Theta", "change"])
-        self._kstep = None
         self._hess = {}
-        if self.n_restarts:
-            self._kstep = self._build_kstep(X, E, Kf, Phi, Gam, C, ThB_full)
-            self.kstep_fn = ca.Function("kstep", [eta], [self._kstep], ["eta"], ["J"])
-            self.kstep_grad_fn = ca.Function("kstep_grad", [eta],
-                                             [self._kstep, ca.gradient(self._kstep, eta)],
+        self._kstep_expr = None
+        self._kstep_parts = (X, E, Kf, Phi, Gam, C, ThB_full) if self.n_restarts else None
+
+    @property
+    def _kstep(self):
+        """The k-step criterion (MX), built on first use; None without restarts.
+
+        Lazy because most problems never use it (the selection's fits are on the
+        likelihood), and its graph and gradient were ~40 % of a build: 25-zone corridor,
+        9 builds of a local problem took 11.6 s, 7.0 s of it in two ``ca.gradient``s.
+        """
+        if self._kstep_expr is None and self._kstep_parts is not None:
+            eta = self._eta
+            self._kstep_expr = J = self._build_kstep(*self._kstep_parts)
+            self.kstep_fn = ca.Function("kstep", [eta], [J], ["eta"], ["J"])
+            self.kstep_grad_fn = ca.Function("kstep_grad", [eta], [J, ca.gradient(J, eta)],
                                              ["eta"], ["J", "grad"])
+        return self._kstep_expr
 
     def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full):
         LM = self.L * self.M
@@ -727,29 +824,59 @@ class LikelihoodProblem:
         rb = np.exp(eta[self.i_rbar])
         return rb, np.exp(eta[self.i_tau]) / rb
 
-    def fitted_network(self, eta) -> ThermalNetwork:
-        """The network with the fitted zone capacitances at ``eta`` (``internal_mass``).
+    def ua_factors(self, eta) -> dict:
+        """Fitted UA factor per wall class at ``eta`` [-] (``wall_factors``; else empty)."""
+        eta = np.asarray(eta, float)
+        return {c: float(np.exp(eta[i])) for c, i in zip(self.ua_classes, self.i_ua)}
 
-        Without capacity factors, the network itself. With them, a shallow copy whose spec
-        gives every measured zone ``capacitance = f_z·C_z`` [J/K] explicitly, so that
-        :class:`ThermalModel`, its state-space export and ``model.json`` carry the mass.
+    def fitted_network(self, eta) -> ThermalNetwork:
+        """The network with the fitted zone capacitances and wall conductances at ``eta``.
+
+        Without capacity (``internal_mass``) or UA (``wall_factors``) factors, the network
+        itself. With them, a shallow copy whose spec gives every measured zone
+        ``capacitance = f_z·C_z`` [J/K] explicitly and every wall of a class with factor f
+        ``R/f`` (all three resistances; C unchanged), with its conduction edges to match,
+        so that :class:`ThermalModel`, its state-space export and ``model.json`` carry
+        them.
         """
-        if not self.i_cf:
+        if not self.i_cf and not self.i_ua:
             return self.network
-        cap = self.zone_capacitances(eta)
         spec = self.network.spec
-        zones = tuple(dataclasses.replace(z, capacitance=float(cap[self.zones.index(z.name)]))
-                      if z.name in self.zones and self.zones.index(z.name) in self.meas else z
-                      for z in spec.zones)
         net = copy.copy(self.network)       # keeps edges, graph and any subclass state
-        net.spec = dataclasses.replace(spec, zones=zones)
+        if self.i_cf:
+            cap = self.zone_capacitances(eta)
+            zones = tuple(dataclasses.replace(z, capacitance=float(cap[self.zones.index(z.name)]))
+                          if z.name in self.zones and self.zones.index(z.name) in self.meas
+                          else z for z in spec.zones)
+            spec = dataclasses.replace(spec, zones=zones)
+        if self.i_ua:
+            fac = self.ua_factors(eta)
+            cond = self.network.conduction_edges
+            if len(cond) != len(spec.walls):
+                raise EstimationError(f"fitted_network: {len(cond)} conduction edges but "
+                                      f"{len(spec.walls)} walls in the spec")
+            f_edge = {e.name: fac.get(c, 1.0) for e, c in zip(cond, self.wall_classes)}
+            # the network's conduction edges are the spec's walls, in order
+            walls = tuple(w if f_edge[e.name] == 1.0 else
+                          dataclasses.replace(w, R=tuple(float(r) / f_edge[e.name] for r in w.R))
+                          for w, e in zip(spec.walls, cond))
+            spec = dataclasses.replace(spec, walls=walls)
+            edges = [e if e.kind != "conduction" or f_edge[e.name] == 1.0 else
+                     dataclasses.replace(e, R=tuple(float(r) / f_edge[e.name] for r in e.R))
+                     for e in self.network.edges]
+            net.edges = edges
+            net.graph = self.network.graph.copy()
+            for e in edges:
+                if e.kind == "conduction":
+                    net.graph.edges[e.a, e.b, e.name]["edge"] = e
+        net.spec = spec
         return net
 
     def thermal_model(self, eta, meta: dict | None = None) -> ThermalModel:
         """The identified :class:`ThermalModel` (network part) at ``eta``.
 
-        With ``internal_mass`` its network's spec holds the fitted zone capacitances
-        (:meth:`fitted_network`).
+        With ``internal_mass`` its network's spec holds the fitted zone capacitances, with
+        ``wall_factors`` the fitted wall resistances (:meth:`fitted_network`).
         """
         net = self.fitted_network(eta)
         rb, cv = self.rbar_c(eta)
