@@ -83,7 +83,7 @@ PLANTS = ("rc", "rc-exact", "fd")
 
 _FAMILY_DEFAULTS = {"plant": "rc", "walls": "types", "wall_spec": "u_value", "gains": "arrivals",
                     "gain_noise": None, "neighbour_noise": 0.0, "hide": 0, "floor_above": False,
-                    "fd_nodes": FD_NODES, "internal_mass": None}
+                    "fd_nodes": FD_NODES, "internal_mass": None, "wall_factor": None}
 
 T_MIN, T_MAX = 4.0, 20.0
 """The paper's bounds on the convection time constant per unit distance [s/m]."""
@@ -274,7 +274,7 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
              gains: str = "arrivals", gain_noise: float | None = None,
              neighbour_noise: float = 0.0, hide: int = 0,
              floor_above: bool = False, fd_nodes: int = FD_NODES,
-             internal_mass=None, progress=None) -> TestbedResult:
+             internal_mass=None, wall_factor=None, progress=None) -> TestbedResult:
     """Simulate a building with known convection edges operated by a VAV BAS.
 
     Parameters
@@ -350,6 +350,12 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         the published spec's (one number for every zone, or ``{zone: factor}``); the spec
         returned keeps the published value, ``truth.details["zone_capacitance"]`` holds
         the plant's. Every plant (``rc``, ``rc-exact``, ``fd``) uses it. Default: none.
+    wall_factor : dict, optional
+        Walls of uncertain construction: ``{class: f}`` (classes ``exterior``,
+        ``partition``, ``boundary`` of :func:`thermctl.estimate.likelihood.problem.wall_class`)
+        multiplies the plant's conductances of every wall of that class by f (all three
+        resistances ``R/f``, capacities kept); the spec returned keeps the published walls.
+        Every plant uses it. Default: none.
     progress : callable, optional
         ``progress(done, total)`` called as the simulation advances (control steps).
 
@@ -402,7 +408,8 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
                                 ("gains", gains), ("gain_noise", gain_noise),
                                 ("neighbour_noise", neighbour_noise),
                                 ("hide", hide), ("floor_above", floor_above),
-                                ("fd_nodes", fd_nodes), ("internal_mass", internal_mass))
+                                ("fd_nodes", fd_nodes), ("internal_mass", internal_mass),
+                                ("wall_factor", wall_factor))
               if v != _FAMILY_DEFAULTS[k]}
     # the family's draws come from their own stream: the default buildings stay bit-for-bit
     rng_family = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(24,)))
@@ -418,6 +425,8 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         spec = layout.spec
     plant_spec = layout.spec if internal_mass is None else _with_internal_mass(layout.spec,
                                                                               internal_mass)
+    if wall_factor is not None:
+        plant_spec = _with_wall_factor(plant_spec, wall_factor)
     net = ThermalNetwork(plant_spec, layout.edges)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v)
     p = model.p  # validates rbar_v / c_v against the number of edges
@@ -555,6 +564,23 @@ def _with_internal_mass(spec: BuildingSpec, factor) -> BuildingSpec:
     zones = tuple(replace(z, capacitance=f[z.name] * spec.zone_capacitance(z.name))
                   if z.name in f else z for z in spec.zones)
     return replace(spec, zones=zones)
+
+
+def _with_wall_factor(spec: BuildingSpec, factor) -> BuildingSpec:
+    """``spec`` with the walls of each class in ``factor`` (``{class: f}``) at ``R/f``."""
+    from ..estimate.likelihood.problem import WALL_CLASSES, wall_class
+
+    if not isinstance(factor, dict):
+        raise SpecError(f"wall_factor: expected {{class: factor}} with classes {WALL_CLASSES}, "
+                        f"found {factor!r}")
+    bad = sorted(set(factor) - set(WALL_CLASSES))
+    if bad:
+        raise SpecError(f"wall_factor: {bad} are not wall classes {WALL_CLASSES}")
+    f = {c: _check(f"wall_factor[{c}]", v, "[-]") for c, v in factor.items()}
+    zones = set(spec.zone_names)
+    walls = tuple(replace(w, R=tuple(r / f[c] for r in w.R))
+                  if (c := wall_class(w.a, w.b, zones)) in f else w for w in spec.walls)
+    return replace(spec, walls=walls)
 
 
 def _plain(v):
