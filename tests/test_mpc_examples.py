@@ -564,20 +564,22 @@ def test_demand_response_example(tmp_path):
     assert true["cost [$]"] < base["cost [$]"]
 
 
-def test_coarse_tail_grid_same_first_input():
+@pytest.mark.parametrize("tail", [[3] * 10, [6] * 5], ids=["30-min tail", "60-min tail"])
+def test_coarse_tail_grid_same_first_input(tail):
     """The linear MPC on the 7-zone testbed (Pugh Hall, true model, euler rows, PIQP) with a
-    non-uniform prediction grid — the first hour in 10-min steps, then 30-min steps to 6 h
-    (16 steps) — against the uniform 36 × 10-min grid: two problems, not one, that must give
-    the same applied input. Three state-feedback steps of the Monday warm-up from 06:00,
-    where the boxes reheat (up to the 32 °C limit). Measured: flows 1e-10 kg/s apart, supply
-    temperatures 3e-5 K, the predicted zone temperatures after 10 min 1e-6 K (over eight
-    steps); the tolerances are 100× that or more. (Starting the 30-min steps after 30 min
-    instead moves the 06:20 reheat by up to 17 K: the first hour must stay fine.)"""
+    non-uniform prediction grid — the first hour in 10-min steps, then 30- or 60-min steps
+    to 6 h (16 or 11 steps) — against the uniform 36 × 10-min grid: two problems, not one,
+    that must give the same applied input. Three state-feedback steps of the Monday warm-up
+    from 06:00, where the boxes reheat (up to the 32 °C limit). Measured over eight steps:
+    flows 1e-10 kg/s apart, supply temperatures 3e-5 K (30-min tail) and 5e-6 K (60-min),
+    the predicted zone temperatures after 10 min 1e-6 K; the tolerances are 100× that or
+    more. (Starting the 30-min steps after 30 min instead moves the 06:20 reheat by up to
+    17 K: the first hour must stay fine.)"""
     from mpc_examples.simulator import make_scenario
 
     scn = make_scenario(7, 0, 0.5, 6.0, start_day=3, start_hour=6.0)
     nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
-    grid = [1] * 6 + [3] * 10
+    grid = [1] * 6 + tail
     mpcs = [LinearMPC(scn.tb.model, scn.hvac, scn.comfort_zones, dt=600.0, horizon=len(s),
                       transcription="euler", steps=s) for s in ([1] * 36, grid)]
     assert mpcs[1].n_variables < 0.5 * mpcs[0].n_variables
