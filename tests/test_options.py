@@ -34,6 +34,8 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", internal_mass=True)),
      "internal_mass needs a Kalman criterion"),
     (IdentifyOptions(selection=SelectionOptions(min_t=-1.0)), "selection.min_t"),
+    (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", wall_factors=True)),
+     "wall_factors needs a Kalman criterion"),
 ])
 def test_check_rejects_bad_and_contradictory_options_in_one_line(opt, match):
     with pytest.raises(DataError, match=match) as exc:
@@ -136,3 +138,32 @@ def test_identify_carries_the_fitted_internal_mass_into_the_model():
                                  for z in tb.spec.measured_zones]))
     heavy, plain = ratios
     assert 2.0 < heavy < 6.0 and plain < 2.0, ratios
+
+
+@pytest.mark.slow
+def test_identify_carries_the_fitted_wall_factors_into_the_model():
+    """`identify` with ``wall_factors``: every wall of the model has the published R divided
+    by its class's fitted factor (the model, not only the fit, has them)."""
+    import warnings
+
+    import numpy as np
+
+    from thermctl.data import read_measurements
+    from thermctl.estimate.likelihood.problem import wall_class
+    from thermctl.identify import identify
+    from thermctl.testbed import generate
+    tb = generate("pugh-hall", days=12, seed=1, wall_factor={"partition": 2.0})
+    meas = read_measurements(tb.data, tb.spec, name="tb")
+    opt = IdentifyOptions(selection=SelectionOptions(method="scores"),
+                          estimation=EstimationOptions(wall_factors=True, intervals="none"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = identify(meas, opt)
+    f = ident.greybox.problem_.ua_factors(ident.greybox.eta_)
+    assert set(f) >= {"exterior", "partition"}
+    zones = tb.spec.zone_names
+    fitted = {w.name: w for w in ident.model.network.spec.walls}
+    assert len(fitted) == len(tb.spec.walls)
+    for w in tb.spec.walls:
+        k = f[wall_class(w.a, w.b, zones)]
+        assert np.allclose(np.asarray(fitted[w.name].R) * k, w.R, rtol=1e-9), w.name

@@ -145,6 +145,11 @@ class EstimationOptions:
         spec omits; :class:`~thermctl.estimate.likelihood.LikelihoodOptions`). It needs
         rows with known heat inputs: with the supply-off rows of a closed-loop building it
         only shapes the noise (docs/identification.md, "Internal mass").
+    wall_factors : bool
+        Kalman criteria: a fitted UA factor per wall class (exterior, partition, other
+        boundary) for walls of uncertain construction; in whole-building fits only (a
+        local problem sees its neighbours' partitions as boundary walls). Measured biased
+        on the testbed (docs/identification.md, "Wall classes").
     """
 
     criterion: str = "likelihood"
@@ -155,12 +160,14 @@ class EstimationOptions:
     initial_state: str = "paper"
     grid: bool = True
     internal_mass: bool = False
+    wall_factors: bool = False
 
     def check(self):
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
-        if self.internal_mass and self.criterion == "simulation":
-            raise DataError("identify option estimation.internal_mass needs a Kalman criterion "
-                            "(likelihood or kstep), not 'simulation'")
+        for name in ("internal_mass", "wall_factors"):
+            if getattr(self, name) and self.criterion == "simulation":
+                raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
+                                "(likelihood or kstep), not 'simulation'")
         _one_of("estimation", "intervals", self.intervals, ("profile", "wald", "none"))
         _one_of("estimation", "estimator", self.estimator,
                 ("nlp", "single_shooting", "grid", "none"))
@@ -671,10 +678,17 @@ def _fitted_network(gb):
 
 
 def _mass_options(opt) -> dict:
-    """Likelihood options of ``estimation.internal_mass``: the factors and every row, since
-    only rows with known supply heat fix a zone's capacity (on the supply-off rows of the
-    closed-loop testbed the factor drifts to 10–30 with or without extra mass)."""
-    return {"internal_mass": True, "fit_rows": "all"} if opt.estimation.internal_mass else {}
+    """Likelihood options of ``estimation.internal_mass`` and ``wall_factors``: the factors
+    and every row, since only rows with known supply heat fix a zone's capacity or a wall's
+    UA (on the supply-off rows of the closed-loop testbed the capacity factor drifts to
+    10–30 with or without extra mass)."""
+    est = opt.estimation
+    out = {"fit_rows": "all"} if est.internal_mass or est.wall_factors else {}
+    if est.internal_mass:
+        out["internal_mass"] = True
+    if est.wall_factors:
+        out["wall_factors"] = True
+    return out
 
 
 def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):

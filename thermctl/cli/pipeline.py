@@ -92,6 +92,9 @@ def identify(
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
+    wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria, whole-"
+                                      "building fits: fit a UA factor per wall class (exterior, "
+                                      "partition, other boundary)."),
     min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model: t "
                                 "statistic of its daily likelihood gains an edge must reach as "
                                 "well (holds under model misfit, unlike BIC); 0: off."),
@@ -180,7 +183,7 @@ def identify(
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
                                      initial_state=initial_state, grid=grid,
-                                     internal_mass=internal_mass),
+                                     internal_mass=internal_mass, wall_factors=wall_factors),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth),
