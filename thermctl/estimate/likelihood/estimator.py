@@ -141,6 +141,8 @@ class LikelihoodEstimator:
     fix : dict, optional
         Parameters held at a value (natural units), e.g. ``{"tau0": 1.0}``.
     max_iter : int
+    tol : float
+        Tolerance on the criterion per observation (L-BFGS-B ``ftol``, IPOPT ``tol``) [-].
     options : LikelihoodOptions, optional
         Model and criterion options; keyword arguments below override its fields.
     **kwargs
@@ -178,7 +180,8 @@ class LikelihoodEstimator:
 
     def __init__(self, network: ThermalNetwork, criterion: str = "likelihood", *,
                  rbar_v=RBAR_V_PAPER, c_v=None, solver: str = "lbfgs", rbar_starts=None,
-                 fix: dict | None = None, max_iter: int = 300, options: LikelihoodOptions | None = None,
+                 fix: dict | None = None, max_iter: int = 300, tol: float = 1e-9,
+                 options: LikelihoodOptions | None = None,
                  **kwargs):
         self.network = network
         self.criterion = criterion
@@ -188,6 +191,7 @@ class LikelihoodEstimator:
         self.rbar_starts = rbar_starts
         self.fix = fix
         self.max_iter = max_iter
+        self.tol = tol
         self.options = options
         self.kwargs = kwargs
 
@@ -246,7 +250,7 @@ class LikelihoodEstimator:
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
                     res = minimize_criterion(pb, self.criterion, eta0, solver=self.solver,
-                                             max_iter=self.max_iter)
+                                             max_iter=self.max_iter, tol=self.tol)
                 tried.append(({"rbar_v": r0}, res.value))
                 if best is None or res.value < best[0].value:
                     best = (res, caught)

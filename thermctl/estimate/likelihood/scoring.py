@@ -53,6 +53,11 @@ class LikelihoodScorer:
         slower).
     max_iter : int
         Per full fit.
+    tol : float
+        Tolerance of the selection's fits on the likelihood per observation [-]. Looser
+        than an estimator's 1e-9: a decision needs the criterion to ~1, not to 1e-4; on six
+        local problems of the 25-zone corridor 1e-7 gave the same edges with 21 % less CPU
+        (39.0 s against 49.1 s) and criterion changes within 2.
     on_fit : callable, optional
         ``on_fit(n)`` after each full fit (``n`` so far): a heartbeat for long searches.
     min_t : float
@@ -70,7 +75,8 @@ class LikelihoodScorer:
     """
 
     def __init__(self, spec, data, criterion: str = "bic", holdout: float = 0.3,
-                 screen: str = "grid", max_iter: int = 200, on_fit=None, min_t: float = 0.0,
+                 screen: str = "grid", max_iter: int = 200, tol: float = 1e-7, on_fit=None,
+                 min_t: float = 0.0,
                  block: float = 86400.0, **estimator_kwargs):
         if criterion not in CRITERIA:
             raise EstimationError(f"criterion must be one of {CRITERIA}, found {criterion!r}")
@@ -82,6 +88,7 @@ class LikelihoodScorer:
         self.kw = dict(estimator_kwargs)
         self.kw.pop("per_edge", None)
         self.max_iter = max_iter
+        self.tol = tol
         self.on_fit = on_fit
         self.min_t = float(min_t)
         self.block = float(block)
@@ -170,7 +177,7 @@ class LikelihoodScorer:
     # ---- internals --------------------------------------------------------------------
     def _fit(self, edges, init=None, fix=None, max_iter=None):
         net = ThermalNetwork(self.spec, [c.pair + (c.d,) for c in edges])
-        est = LikelihoodEstimator(net, per_edge=True, fix=fix,
+        est = LikelihoodEstimator(net, per_edge=True, fix=fix, tol=self.tol,
                                   max_iter=max_iter or self.max_iter, **self.kw)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
