@@ -24,7 +24,7 @@ from .days import DayArray, day_array
 from .inputs import network_inputs
 
 __all__ = ["Measurements", "QualityReport", "Gap", "PAPER_CALIBRATION", "PAPER_VALIDATION_START",
-           "MIN_CALIBRATION_DAYS"]
+           "MIN_CALIBRATION_DAYS", "SPLIT_DAY_SLACK"]
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +42,11 @@ from :meth:`Measurements.split`: one day holds one weather pattern and one occup
 cycle, too little to tell an air path from the gains, and interval estimates from it are
 far too narrow (a 2-day file gave a model from 1 calibration day with an edge
 "identified ±35 %")."""
+
+
+SPLIT_DAY_SLACK = pd.Timedelta(hours=1)
+"""Grid time a first or last date may lack and still count as a whole day for the default
+:meth:`Measurements.split` (rows lost or stamps jittered at the ends of a log)."""
 
 
 # ---------------------------------------------------------------------------- results
@@ -334,7 +339,8 @@ class Measurements:
             other is the rest of the data (after it, or else before it). Default: the
             paper's split (calibration 2011-01-21..02-09, validation from 2011-02-10 on)
             when the data covers 2011-01-21..2011-02-12; otherwise the last quarter of the
-            whole days (rounded, at least one) validates and the days before calibrate.
+            whole days (rounded, at least one) validates and the days before calibrate; a
+            first or last day short of at most :data:`SPLIT_DAY_SLACK` (1 h) counts as whole.
 
         Returns
         -------
@@ -491,11 +497,19 @@ class Measurements:
         return Measurements(sub, self.step, self.spec, self.units, self.source, self.quality)
 
     def _whole_days(self) -> list:
-        """Dates with all their grid stamps present (NaN or not)."""
+        """Dates the grid covers but for at most :data:`SPLIT_DAY_SLACK` (NaN or not).
+
+        The grid runs from the first to the last stamp, so only the first and last dates
+        can be short. A log whose last row is lost, or whose last stamp is jittered a few
+        seconds early (23:54:50 for 23:55), still holds that day: counted strictly, the
+        day would drop out and move the default split a whole day (a messy export of 16
+        days calibrated on 11 days instead of the clean export's 12).
+        """
         K = _DAY_NS // int(self.step.value)
+        slack = int(SPLIT_DAY_SLACK / self.step)      # 12 samples at 5 min
         dates = pd.Series(self.frame.index.date)
         counts = dates.value_counts()
-        return sorted(d for d, c in counts.items() if c == K)
+        return sorted(d for d, c in counts.items() if c >= K - slack)
 
 
 def _short_list(items, k=8) -> str:
