@@ -62,3 +62,139 @@ def test_frequencies_and_below():
     res = StabilityResult(f, rs, 0.5, 2, 0, 1.0, 1.0)
     assert res.n_ok == 2 and res.below([("a", "b"), "air:b-c"]) == ["air:b-c"]
     assert STABILITY_THRESHOLD == 0.6 and "below threshold" in res.summary()
+
+
+def _gappy_meas(days=12):
+    """Measurements of a 2-zone toy table (no fit runs on it: the selection is stubbed)."""
+    from types import SimpleNamespace
+    fr = _frame(days)
+    return SimpleNamespace(frame=fr, step=pd.Timedelta("1h"), spec=None, units="si",
+                           source="toy", quality=None)
+
+
+def test_stability_selection_counts_what_the_selection_chose(monkeypatch):
+    import thermctl.selection as selection
+    import thermctl.stability as stability
+    from types import SimpleNamespace
+
+    seen = []
+
+    def fake_select(spec, meas, **kw):
+        # "a-b" on every resample; "b-c" only when the first day is kept
+        rows = meas.frame["T:a"].notna()
+        seen.append((int(rows.sum()), kw["final_per_edge"], "progress" in kw))
+        edges = [("a", "b", 1.0)] + ([("b", "c", 1.0)] if rows.iloc[0] else [])
+        return SimpleNamespace(edges=edges)
+
+    monkeypatch.setattr(selection, "select_air_paths", fake_select)
+    monkeypatch.setattr(stability, "_candidate_names",
+                        lambda spec, c: ["air:a-b", "air:b-c", "air:a-c"])
+    monkeypatch.setattr(stability, "_measurements", lambda cal, frame: SimpleNamespace(
+        frame=frame))
+    kw = dict(resamples=8, seed=1, workers=1, candidates=[("a", "b"), ("b", "c"), ("a", "c")],
+              progress=lambda *a: None)
+    r1 = stability.stability_selection(None, _gappy_meas(), **kw)
+    r2 = stability.stability_selection(None, _gappy_meas(), **kw)
+    assert r1.frequency == r2.frequency and r1.kept_days == r2.kept_days
+    first = str(_frame(12).index[0].date())
+    share = sum(first in k for k in r1.kept_days) / 8
+    assert r1.frequency == {"air:a-b": 1.0, "air:a-c": 0.0, "air:b-c": share}
+    assert 0 < share < 1
+    # half the 6 blocks of 2 days: 6 days of 24 rows; no final refit; no callbacks sent
+    assert set(seen) == {(6 * 24, True, False)}
+
+
+@pytest.mark.slow
+def test_pugh_hall_true_paths_are_stable_and_frequencies_reach_the_outputs(tmp_path):
+    """Pugh Hall testbed, 16 days (12 calibrate), seed 0, B = 10 resamples.
+
+    Measured (docs/identification.md, "Stability selection"): the full data's selection keeps
+    the 3 true paths and the spurious r241–r244; every one of the four is chosen on 10 of
+    10 resamples, so stability selection drops nothing here.
+    """
+    import json
+    import time
+    import warnings
+
+    from thermctl.data import read_measurements
+    from thermctl.identify import IdentifyOptions, SelectionOptions, SplitOptions, identify
+    from thermctl.network import air_path_name
+    from thermctl.outputs import write_outputs
+    from thermctl.testbed import generate
+
+    tb = generate("pugh-hall", days=16, seed=0)
+    meas = read_measurements(tb.data, tb.spec, name="tb")
+    opt = IdentifyOptions(selection=SelectionOptions(stability=10),
+                          split=SplitOptions(workers=2))
+    c0 = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = identify(meas, opt)
+    stab = ident.selection.stability
+    print(stab.summary(), f"\nmain CPU {time.process_time() - c0:.0f} s + resamples "
+          f"{stab.cpu:.0f} s", *ident.notes, sep="\n")
+    true = [air_path_name(a, b) for a, b, _ in tb.truth.edges]
+    assert all(stab.frequency[t] >= STABILITY_THRESHOLD for t in true)
+    assert stab.frequency["air:r241-r244"] == 1.0         # spurious, but stable (measured)
+    assert stab.n_ok == 10 and all(len(k) == 6 for k in stab.kept_days)
+    assert any(n.startswith("stability selection") for n in ident.notes)
+    assert "resamples of half the days" in ident.selection.reasons[true[0]]
+    write_outputs(ident, tmp_path / "out")
+    doc = json.loads((tmp_path / "out" / "identification.json").read_text())
+    assert doc["structure"]["stability"]["frequency"] == stab.frequency
+    assert any(b["title"].startswith("Stability selection") for b in doc["report"])
+    assert ident.model.meta["selection"]["stability"]["threshold"] == 0.6
+
+
+@pytest.mark.parametrize("sel, match", [
+    (dict(stability=-1), "selection.stability must be an integer"),
+    (dict(stability=2.5), "selection.stability must be an integer"),
+    (dict(stability=3, stability_threshold=0.0), "stability_threshold"),
+    (dict(stability=3, method="scores"), "stability needs the model-based selection"),
+])
+def test_stability_options_are_checked_in_one_line(sel, match):
+    from thermctl.identify import IdentifyOptions, SelectionOptions
+    with pytest.raises(DataError, match=match) as exc:
+        IdentifyOptions(selection=SelectionOptions(**sel)).check()
+    assert "\n" not in str(exc.value)
+
+
+def test_cli_stability_defaults_are_the_dataclass_defaults():
+    import typer.main
+
+    from thermctl.cli import app
+    from thermctl.identify import SelectionOptions
+    cmd = typer.main.get_command(app).commands["identify"]
+    default = {p.name: p.default for p in cmd.params}
+    d = SelectionOptions()
+    assert (default["stability"], default["stability_threshold"]) == (0, STABILITY_THRESHOLD)
+    assert (d.stability, d.stability_threshold) == (0, STABILITY_THRESHOLD)
+
+
+def test_stability_local_combines_each_resample_by_the_rule(monkeypatch):
+    """Two local problems see air:a-b; the AND rule keeps it only when both ends do."""
+    import thermctl.local as local
+    from thermctl.local import LocalProblem, LocalResult
+    from thermctl.stability import stability_local
+
+    probs = [LocalProblem("a", None, (("a", "b", 1.0),), ()),
+             LocalProblem("b", None, (("a", "b", 1.0), ("b", "c", 1.0)), ())]
+
+    def fake_run(problems, frames, **kw):
+        assert len(problems) == len(frames) == 2 * 4 and "rule" not in kw
+        out = []
+        for p, fr in zip(problems, frames):
+            first = bool(np.isfinite(fr["T:a"].iloc[0]))
+            edges = ["air:a-b"] if (p.zone == "b" or first) else []
+            edges += ["air:b-c"] if p.zone == "b" else []
+            out.append(LocalResult(p.zone, edges, {}, {}, float("nan"), 1, cpu=1.0))
+        return out
+
+    monkeypatch.setattr(local, "run_local", fake_run)
+    r = stability_local(probs, _frame(12), resamples=4, seed=2, rule="both", workers=1)
+    first = str(_frame(12).index[0].date())
+    share = sum(first in k for k in r.kept_days) / 4
+    assert r.frequency == {"air:a-b": share, "air:b-c": 1.0} and r.cpu == 8.0
+    assert 0 < share < 1
+    assert stability_local(probs, _frame(12), resamples=4, seed=2, rule="either",
+                           workers=1).frequency["air:a-b"] == 1.0

@@ -99,6 +99,19 @@ class SelectionOptions:
         likelihood gains (:meth:`~thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`),
         which holds when the model is only approximately right and BIC does not [-];
         0 turns the test off.
+    stability : int
+        Stability selection: B resamples of half the calibration days (blocks of 2
+        consecutive days, :func:`thermctl.stability.stability_selection`), each running the
+        same selection; every candidate's selection frequency is reported and a selected
+        edge chosen on fewer than ``stability_threshold`` of them is dropped (the final
+        model refitted without it). 0: off. It costs about B/2 selections of the full data
+        (measured in docs/identification.md, "Stability selection"), hence off by default.
+    stability_threshold : float
+        Frequency an edge needs to stay [-]. Meinshausen & Bühlmann (2010) use 0.6–0.9;
+        0.6 (:data:`thermctl.stability.STABILITY_THRESHOLD`) drops an edge only when
+        the selection leaves it out on at least 40 % of the resamples.
+    stability_seed : int
+        Seed of the resamples.
     """
 
     method: str = "auto"
@@ -106,6 +119,9 @@ class SelectionOptions:
     criterion: str = "bic"
     margin: float = 10.0
     min_t: float = 0.0
+    stability: int = 0
+    stability_threshold: float = 0.6
+    stability_seed: int = 0
 
     def check(self):
         _one_of("selection", "method", self.method, SELECTIONS)
@@ -113,6 +129,12 @@ class SelectionOptions:
         _one_of("selection", "criterion", self.criterion, ("bic", "aic", "holdout"))
         if not self.min_t >= 0:
             raise DataError(f"identify option selection.min_t must be >= 0, found {self.min_t}")
+        if not (isinstance(self.stability, (int, np.integer)) and self.stability >= 0):
+            raise DataError(f"identify option selection.stability must be an integer >= 0 "
+                            f"(resamples), found {self.stability!r}")
+        if not 0.0 < self.stability_threshold <= 1.0:
+            raise DataError(f"identify option selection.stability_threshold must be in (0, 1], "
+                            f"found {self.stability_threshold}")
 
 
 @dataclass
@@ -286,6 +308,9 @@ class IdentifyOptions:
             raise DataError("identify: estimation.criterion='simulation' (the paper's "
                             "pipeline) selects air paths by the paper's rule on SIN scores; "
                             "selection.method='model' needs a Kalman criterion")
+        if self.selection.stability and self.selection_method == "scores":
+            raise DataError("identify: selection.stability needs the model-based selection "
+                            "(selection.method='model' with a Kalman criterion)")
         local = self.split.scale == "local"
         if local and self.selection_method == "scores":
             raise DataError("identify: split.scale='local' needs the model-based selection "
@@ -496,14 +521,19 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
         # from SIN's few picks: backward; from every pair: forward (cheaper and what
         # model-based selection does for small buildings)
         direction = "backward" if sid is not None and start is None else "both"
+        sel_kw = dict(candidates=cands, criterion=opt.selection.criterion, direction=direction,
+                      margin=opt.selection.margin, min_t=opt.selection.min_t,
+                      start=start or (), solar=opt.estimation.solar, **_mass_options(opt))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
-            sel = select_air_paths(spec, cal, candidates=cands,
-                                   criterion=opt.selection.criterion, direction=direction,
-                                   margin=opt.selection.margin, progress=say, on_fit=on_fit,
-                                   min_t=opt.selection.min_t,
-                                   start=start or (), final_criterion=opt.estimation.criterion,
-                                   solar=opt.estimation.solar, **_mass_options(opt))
+            sel = select_air_paths(spec, cal, progress=say, on_fit=on_fit,
+                                   final_criterion=opt.estimation.criterion, **sel_kw)
+        if opt.selection.stability:
+            from .stability import stability_selection
+            stab = stability_selection(spec, cal, resamples=opt.selection.stability,
+                                       seed=opt.selection.stability_seed,
+                                       workers=opt.split.workers, progress=progress, **sel_kw)
+            sel = _drop_unstable(spec, cal, opt, sel, stab, notes)
         net = ThermalNetwork(spec, sel.edges)
         if not sel.edges:
             notes.append("the data support no convection edge: the model is conduction-only")
@@ -521,6 +551,8 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
     if sel is not None:
         meta["selection"] = {"path": [[st.action, st.edge, st.value, st.delta] for st in sel.path],
                              "reasons": sel.reasons}
+        if getattr(sel, "stability", None) is not None:
+            meta["selection"]["stability"] = _stability_meta(sel.stability, opt)
     if gb is not None:
         meta["greybox"] = _greybox_meta(gb, ida)
         net = _fitted_network(gb)
@@ -542,14 +574,16 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
                         fit_rows=opt.split.rows, latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
                         s_min=opt.structure.s_min, min_t=opt.selection.min_t)
-    return _finish_local(meas, cal, val, opt, li, progress)
+    return _finish_local(meas, cal, val, opt, li, progress, client)
 
 
-def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
+def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identification:
     """The model of combined local results: whole-building refit when small enough."""
     spec = meas.spec
     notes = []
     logger.info("%s", li.summary())
+    stab = _local_stability(li, cal, opt, progress, client, notes) \
+        if opt.selection.stability else None
     failed = [r for r in li.results if r.error]
     if failed:
         notes.append(f"{len(failed)} local problem(s) failed, their air paths are undecided: "
@@ -587,6 +621,8 @@ def _finish_local(meas, cal, val, opt, li, progress) -> Identification:
                               "reason": v.reason} for v in li.verdicts},
     }
     meta["selection"] = {"path": [], "reasons": li.reasons}
+    if stab is not None:
+        meta["selection"]["stability"] = _stability_meta(stab, opt)
     if gb is not None:
         meta["greybox"] = _greybox_meta(gb, ida)
         model = ThermalModel(_fitted_network(gb), rbar_v=gb.rbar_v_, c_v=gb.c_v_, meta=meta)
@@ -663,13 +699,112 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.split.combine,
                           opt.selection.margin, wall)
             cal, val = splits[k]
-            out[k] = _finish_local(items[k], cal, val, opt, li, progress)
+            out[k] = _finish_local(items[k], cal, val, opt, li, progress, client)
         for k in whole:
             out[k] = futures[k].result() if k in futures else identify(items[k], opt, progress)
         return [out[k] for k in range(len(items))]
     finally:
         if own:
             client.close()
+
+
+def _local_stability(li, cal, opt, progress, client, notes):
+    """Stability selection of the local path: every local problem on every resample
+    (:func:`thermctl.stability.stability_local`); the combined air paths chosen on fewer
+    than ``stability_threshold`` of them leave ``li`` (its verdicts say why) before the
+    whole-building refit."""
+    from .stability import stability_local
+    thr = opt.selection.stability_threshold
+    stab = stability_local(li.problems, cal.frame, resamples=opt.selection.stability,
+                           seed=opt.selection.stability_seed, rule=li.rule,
+                           margin=opt.selection.margin, workers=opt.split.workers,
+                           client=client or opt.split.scheduler, progress=progress,
+                           criterion=opt.selection.criterion, solar=opt.estimation.solar,
+                           internal_mass=opt.estimation.internal_mass,
+                           fit_rows=opt.split.rows, min_t=opt.selection.min_t)
+    dropped = stab.below(li.edges, thr)
+    stab.dropped = dropped
+    freq = ", ".join(f"{air_path_name(a, b)} {stab.frequency.get(air_path_name(a, b), 0.0):.0%}"
+                     for a, b, _ in li.edges)
+    notes.append(f"stability selection ({stab.n_ok} of {len(stab.resamples)} resamples of half "
+                 f"the {stab.block_days}-day blocks, every local problem on each, "
+                 f"{stab.cpu:.0f} s CPU): combined air paths chosen on {freq or 'none kept'}"
+                 + (f"; dropped {', '.join(dropped)} (below {thr:g})" if dropped else
+                    f"; every one at or above the threshold {thr:g}"))
+    n = stab.n_ok
+    for v in li.verdicts:
+        f = stab.frequency.get(v.name)
+        if f is None:
+            continue
+        if v.name in dropped:
+            v.kept, v.rbar_v = False, float("nan")
+            v.reason = (f"out: {v.reason}, but chosen on {f:.0%} of {n} resamples of half "
+                        f"the days, below the stability threshold {thr:g}")
+        else:
+            v.reason += f"; chosen on {f:.0%} of {n} resamples of half the days"
+    li.edges = [e for e in li.edges if air_path_name(e[0], e[1]) not in dropped]
+    li.rbar_v = {k: v for k, v in li.rbar_v.items() if k not in dropped}
+    return stab
+
+
+def _stability_meta(stab, opt) -> dict:
+    """``meta["selection"]["stability"]``: frequencies, threshold, what was dropped."""
+    return stab.to_dict() | {"threshold": opt.selection.stability_threshold,
+                             "dropped": list(getattr(stab, "dropped", []))}
+
+
+def _stability_reasons(reasons: dict, stab, threshold: float, dropped) -> dict:
+    """Each candidate's reason with its selection frequency (and why a dropped one left)."""
+    out = dict(reasons)
+    n = stab.n_ok
+    for nm, f in stab.frequency.items():
+        said = f"chosen on {f:.0%} of {n} resamples of half the days"
+        if nm in dropped:
+            out[nm] = (f"out: selected on all the data ({out.get(nm, '')}), but {said}, "
+                       f"below the stability threshold {threshold:g}")
+        else:
+            out[nm] = (out.get(nm, "") + f"; {said}").lstrip("; ")
+    return out
+
+
+def _drop_unstable(spec, cal, opt, sel, stab, notes):
+    """The selection without its edges chosen on fewer than ``stability_threshold`` of the
+    resamples, the final model refitted without them (a :class:`SelectionResult` copy with
+    ``stability`` set)."""
+    from dataclasses import replace
+
+    from .estimate.likelihood import LikelihoodEstimator
+    thr = opt.selection.stability_threshold
+    dropped = stab.below(sel.edges, thr)
+    stab.dropped = dropped
+    out = replace(sel, reasons=_stability_reasons(sel.reasons, stab, thr, dropped))
+    out.stability = stab
+    freq = ", ".join(f"{nm} {stab.frequency.get(nm, 0.0):.0%}"
+                     for nm in (air_path_name(a, b) for a, b, _ in sel.edges))
+    head = (f"stability selection ({stab.n_ok} of {len(stab.resamples)} resamples of half the "
+            f"{stab.block_days}-day blocks, {stab.cpu:.0f} s CPU): selected edges chosen on "
+            f"{freq or 'none selected'}")
+    if not dropped:
+        notes.append(head + f"; every one at or above the threshold {thr:g}")
+        return out
+    kept = [e for e in sel.edges if air_path_name(e[0], e[1]) not in dropped]
+    notes.append(head + f"; dropped {', '.join(dropped)} (below {thr:g}) and refitted "
+                 "the model without " + ("it" if len(dropped) == 1 else "them"))
+    out.edges = kept
+    out.per_edge = {k: v for k, v in sel.per_edge.items() if k not in dropped}
+    if not kept:
+        return out
+    est = sel.estimator
+    init = {k: v for k, v in est.params_.items()
+            if not ConvectionParameters.is_rbar(k, per_edge=True)}
+    if sel.per_edge and "rbar_v" not in init:
+        init["rbar_v"] = float(np.exp(np.mean(np.log(list(sel.per_edge.values())))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BoundWarning)
+        out.estimator = LikelihoodEstimator(
+            ThermalNetwork(spec, kept), opt.estimation.criterion, solar=opt.estimation.solar,
+            **_mass_options(opt)).fit(cal, init=init)
+    return out
 
 
 def _fitted_network(gb):

@@ -361,6 +361,7 @@ def identification_document(ident: Identification) -> dict:
                          for st in sel.path],
                 "reasons": sel.reasons, "per_edge_rbar_v": sel.per_edge,
                 "fits": sel.n_fits, "time_s": sel.time},
+            "stability": (model.meta.get("selection") or {}).get("stability"),
         },
         "estimate": _estimate_summary(est),
         "greybox": model.meta.get("greybox"),
@@ -389,6 +390,19 @@ def identification_document(ident: Identification) -> dict:
                                     "note": st.note} for st in sel.path]})
         blocks.append({"section": "Structure", "kind": "table", "title": "Why each candidate is in or out",
                        "content": [{"candidate": k, "reason": v} for k, v in sel.reasons.items()]})
+    stab = doc["structure"]["stability"]
+    if stab:
+        from .network import air_path_name
+        final = {air_path_name(e["a"], e["b"]) for e in edges}
+        blocks.append({
+            "section": "Structure", "kind": "table",
+            "title": (f"Stability selection ({stab['ok']} resamples of half the "
+                      f"{stab['block_days']}-day blocks; threshold {stab['threshold']:g})"),
+            "content": [{"candidate": nm, "chosen on [-]": f,
+                         "in the model": ("yes" if nm in final else
+                                          "dropped: below threshold" if nm in stab["dropped"]
+                                          else "no")}
+                        for nm, f in sorted(stab["frequency"].items(), key=lambda kv: -kv[1])]})
     if top:
         blocks.append({"section": "Structure", "kind": "table",
                        "title": "Highest SIN pair scores (walls included)",

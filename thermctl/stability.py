@@ -225,6 +225,17 @@ def _select_task(index, spec, meas, kwargs):
     return index, edges, time.process_time() - c0, time.perf_counter() - t0, err
 
 
+def _candidate_names(spec, candidates) -> list:
+    from .structure.search import as_candidates
+    return [c.name for c in as_candidates(spec, candidates)]
+
+
+def _measurements(cal, frame):
+    """``cal`` with its frame replaced (same spec, step, units, quality)."""
+    from .data import Measurements
+    return Measurements(frame, cal.step, cal.spec, cal.units, cal.source, cal.quality)
+
+
 def _frequencies(names, resamples):
     ok = [r for r in resamples if r.error is None]
     if not ok:
@@ -261,10 +272,6 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
     -------
     StabilityResult
     """
-    from .data import Measurements
-    from .network import air_path_name
-    from .structure.search import as_candidates
-
     t0 = time.perf_counter()
     kw = {k: v for k, v in selection_kwargs.items() if k not in ("progress", "on_fit")}
     kw.update(final_per_edge=True, final_criterion="likelihood")
@@ -272,7 +279,7 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
     if isinstance(cands, str):
         raise EstimationError("stability_selection: give the candidates as a list (the full "
                               f"data's), not {cands!r}: SIN on half the days may not run")
-    names = [c.name for c in as_candidates(spec, cands)]
+    names = _candidate_names(spec, cands)
     days = resample_days(cal.frame, resamples, fraction=fraction, block_days=block_days,
                          seed=seed)
     out = [StabilityResample(b, [str(d) for d in ks]) for b, ks in enumerate(days)]
@@ -280,8 +287,7 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
     n = len(days)
 
     def meas(b):
-        return Measurements(mask_days(cal.frame, days[b]), cal.step, cal.spec, cal.units,
-                            cal.source, cal.quality)
+        return _measurements(cal, mask_days(cal.frame, days[b]))
 
     finished = []
 

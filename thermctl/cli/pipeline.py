@@ -98,6 +98,16 @@ def identify(
     min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model: t "
                                 "statistic of its daily likelihood gains an edge must reach as "
                                 "well (holds under model misfit, unlike BIC); 0: off."),
+    stability: int = typer.Option(_D.selection.stability, "--stability", min=0,
+                                  help="--selection model: stability selection with this many "
+                                  "resamples of half the calibration days (blocks of 2 days); "
+                                  "a selected air path chosen on fewer than "
+                                  "--stability-threshold of them is dropped. 0: off (it costs "
+                                  "about B/2 selections)."),
+    stability_threshold: float = typer.Option(_D.selection.stability_threshold,
+                                              "--stability-threshold", help="--stability: "
+                                              "selection frequency an air path needs to stay "
+                                              "(Meinshausen & Bühlmann: 0.6-0.9)."),
     selection_criterion: str = typer.Option(_D.selection.criterion, help="--selection model: bic, "
                                             "aic or holdout (likelihood of the last 30 % of the "
                                             "calibration days)."),
@@ -179,7 +189,8 @@ def identify(
                                    allow_parallel=allow_parallel),
         selection=SelectionOptions(method=selection, candidates=candidates,
                                    criterion=selection_criterion, margin=margin,
-                                   min_t=min_t),
+                                   min_t=min_t, stability=stability,
+                                   stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
                                      initial_state=initial_state, grid=grid,
