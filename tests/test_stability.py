@@ -198,3 +198,38 @@ def test_stability_local_combines_each_resample_by_the_rule(monkeypatch):
     assert 0 < share < 1
     assert stability_local(probs, _frame(12), resamples=4, seed=2, rule="either",
                            workers=1).frequency["air:a-b"] == 1.0
+
+
+def test_an_edge_below_the_threshold_is_dropped_and_the_model_refitted():
+    """A real selection (Pugh Hall, 5 days, two true paths as candidates) and made-up
+    frequencies: the edge below the threshold leaves, the final fit has the other only."""
+    import warnings
+
+    from thermctl.data import read_measurements
+    from thermctl.identify import IdentifyOptions, _drop_unstable
+    from thermctl.selection import select_air_paths
+    from thermctl.testbed import generate
+
+    tb = generate("pugh-hall", days=5, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meas = read_measurements(tb.data, tb.spec, name="tb")
+        cal = meas.window(duration="4D")
+        sel = select_air_paths(meas.spec, cal, candidates=[("r240", "r243"), ("r242", "r244")],
+                               direction="backward", max_iter=60, solar=False)
+    assert {e[:2] for e in sel.edges} == {("r240", "r243"), ("r242", "r244")}
+    rs = [StabilityResample(b, [], ["air:r240-r243"] + (["air:r242-r244"] if b == 0 else []))
+          for b in range(5)]
+    stab = StabilityResult({"air:r240-r243": 1.0, "air:r242-r244": 0.2}, rs, 0.5, 2, 0, 1.0,
+                           9.0)
+    notes = []
+    opt = IdentifyOptions()
+    opt.estimation.solar = False
+    out = _drop_unstable(meas.spec, cal, opt, sel, stab, notes)
+    assert [e[:2] for e in out.edges] == [("r240", "r243")]
+    assert [e.name for e in out.estimator.network.convection_edges] == ["air:r240-r243"]
+    assert out.stability is stab and stab.dropped == ["air:r242-r244"]
+    assert "below the stability threshold 0.6" in out.reasons["air:r242-r244"]
+    assert "chosen on 100% of 5" in out.reasons["air:r240-r243"]
+    assert "dropped air:r242-r244" in notes[0] and "\n" not in notes[0]
+    assert sel.edges != out.edges                     # the full data's selection is kept
