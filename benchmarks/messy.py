@@ -1,7 +1,7 @@
 """A messy export of a testbed building against its clean export: does the structure hold?
 
 Run:  OMP_NUM_THREADS=1 .venv/bin/python benchmarks/messy.py [--days 16] [--seed 0]
-          [--building pugh-hall ring] [--single] [--out benchmarks/results/messy.txt]
+          [--building pugh-hall ring] [--single [MESS ...]] [--out FILE]
 
 Issue 20 ("robust to what real logs look like"). For each building the testbed's data are
 written as the user's CSV exactly as ``thermctl testbed`` writes them
@@ -16,11 +16,13 @@ a copy is then made messy by a seeded RNG doing exactly six things to the CSV li
 * ``duplicate``: 20 rows written twice, verbatim, right after themselves;
 * ``disorder``:  60 pairs of rows less than an hour apart swapped.
 
-Both files are read with :func:`thermctl.data.read_measurements` and identified with
+Both files are read with :func:`thermctl.data.read_measurements` (the messy one also with
+``snap="30s"``: a stamp within 30 s of a grid point is its sample) and identified with
 :func:`thermctl.identify.identify` and the default options. The table gives what reading
 did (rows read, dropped, repaired; the data-quality summary), the air paths found on each
 export and their symmetric difference, the geometric mean of R̄_v, and CPU seconds.
-``--single`` adds one row per manipulation alone (which mess moves what).
+``--single`` adds one row per manipulation alone (which mess moves what; all six, or
+those named).
 """
 
 from __future__ import annotations
@@ -141,12 +143,12 @@ def make_messy(csv_text: str, seed: int, messes=MESSES) -> tuple[str, dict]:
     return header + "\n" + "\n".join(rows) + "\n", log
 
 
-def _run(path, spec, name):
+def _run(path, spec, name, **read_kw):
     """Read and identify one file; returns a result row."""
     c0 = time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meas = read_measurements(path, spec, name=name)
+        meas = read_measurements(path, spec, name=name, **read_kw)
         c1 = time.process_time()
         ident = identify(meas)
     c2 = time.process_time()
@@ -185,7 +187,7 @@ LEGEND = ("rows: data rows in the file; dup: duplicate rows removed; ooo: rows o
           "paths; R̄_v: geometric mean [K/(W m)]; CPU seconds to read and to identify.")
 
 
-def study(building: str, days: float, seed: int, mess_seed: int, single: bool, out):
+def study(building: str, days: float, seed: int, mess_seed: int, single=(), out=sys.stdout):
     """Generate, export clean and messy, read and identify both; print to ``out``."""
     c0 = time.process_time()
     with warnings.catch_warnings():
@@ -196,19 +198,19 @@ def study(building: str, days: float, seed: int, mess_seed: int, single: bool, o
     print(f"# {building}, {days:g} days, seed {seed}, mess seed {mess_seed}: "
           f"{tb.network.n_zones} zones ({len(tb.spec.measured_zones)} measured), true paths "
           f"{sorted(true_edges)}; generated in {gen_s:.1f} CPU s", file=out, flush=True)
-    variants = [("clean", ()), ("messy", MESSES)]
-    if single:
-        variants += [(f"only {m}", (m,)) for m in MESSES]
+    variants = [("clean", (), {}), ("messy", MESSES, {}),
+                ("messy snap 30 s", MESSES, {"snap": "30s"})]
+    variants += [(f"only {m}", (m,), {}) for m in single]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         buf = io.StringIO()
         write_data_csv(tb.data, buf)
         clean = buf.getvalue()
-        for name, messes in variants:
+        for name, messes, read_kw in variants:
             text, log = (clean, {}) if not messes else make_messy(clean, mess_seed, messes)
             path = Path(tmp) / f"{name.replace(' ', '_')}.csv"
             path.write_text(text)
-            r = _run(path, tb.spec, name)
+            r = _run(path, tb.spec, name, **read_kw)
             r["log"] = log
             rows.append(r)
             if name == "clean":
@@ -238,7 +240,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0, help="testbed seed")
     ap.add_argument("--mess-seed", type=int, default=20, help="seed of the messy copy")
     ap.add_argument("--building", nargs="+", default=["pugh-hall"])
-    ap.add_argument("--single", action="store_true", help="also each mess alone")
+    ap.add_argument("--single", nargs="*", metavar="MESS",
+                    help=f"also each mess alone (all of {', '.join(MESSES)}, or those named)")
     ap.add_argument("--out", type=Path, help="also write the output here")
     args = ap.parse_args(argv)
 
@@ -263,7 +266,8 @@ def main(argv=None):
           file=out)
     print(LEGEND, file=out)
     for b in args.building:
-        study(b, args.days, args.seed, args.mess_seed, args.single, out)
+        single = () if args.single is None else (args.single or MESSES)
+        study(b, args.days, args.seed, args.mess_seed, single, out)
     print(f"total {time.process_time() - c0:.1f} CPU s", file=out)
     if fh:
         fh.close()

@@ -34,7 +34,8 @@ Choices this package makes (``docs/data-format.md`` repeats them for users):
 * The model grid has step ``step`` (default: the data's median spacing snapped to a
   whole number of minutes that divides a day, or of seconds that divides a minute below
   one minute), aligned to local midnight, from the first to the last stamp. A grid
-  point with a sample within 1 s takes that sample; otherwise the value is linearly
+  point with a sample within 1 s (within ``snap`` if given: a trend log polled with
+  jitter, ``snap="30s"``) takes that sample; otherwise the value is linearly
   interpolated in time between the valid samples before and after it. The time between
   those two samples is the *gap*: up to 1.5 × the larger of grid step and data spacing
   it is plain resampling of irregular stamps, up to ``gap_limit`` a short gap

@@ -8,7 +8,8 @@ All times here are int64 nanoseconds since the epoch (UTC); durations are ns too
 * The grid is aligned to local midnight of the data's time zone and runs from the first
   grid point at or after the first stamp to the last one at or before the last stamp
   (each with 1 s tolerance).
-* A grid point with a valid sample within 1 s takes that sample; otherwise the value is
+* A grid point with a valid sample within 1 s (within ``snap``, when the reader is given
+  one: a trend log polled with jitter) takes that sample; otherwise the value is
   interpolated linearly between the valid samples before and after it. The time between
   those two samples is the gap: up to ``bridge`` (1.5 × the larger of step and data
   spacing) the point is plain resampling, up to ``gap_limit`` a filled short gap, longer
@@ -38,8 +39,10 @@ class _Grid(NamedTuple):
     index: pd.DatetimeIndex    # the same instants in the data's time zone, named "time"
     step_ns: int
     data_step: int             # median spacing of the distinct stamps
-    off_grid: int              # distinct stamps more than 1 s off the grid
+    off_grid: int              # distinct stamps more than ``snap`` off the grid
     bridge: float              # longest span between samples that is plain resampling
+    snapped: int = 0           # distinct stamps more than 1 s but at most ``snap`` off it
+    snap: int = _ON_GRID_TOL   # a sample this close to a grid point is its sample
 
 
 def _timedelta(value, what) -> pd.Timedelta:
@@ -86,8 +89,14 @@ def _infer_step(data_step: int, src) -> int:
     return int(best * 1_000_000_000)
 
 
-def _make_grid(t, step, tzinfo, src, notes) -> _Grid:
-    """The grid for sorted distinct stamps ``t`` [ns]; appends a note if the step is rounded."""
+def _make_grid(t, step, tzinfo, src, notes, snap=None) -> _Grid:
+    """The grid for sorted distinct stamps ``t`` [ns]; appends a note if the step is rounded.
+
+    ``snap`` [ns or anything :func:`_timedelta` reads] widens the 1 s within which a stamp
+    is on a grid point (also for the first and last grid point: a first stamp 10 s late
+    still starts the grid at its slot); it must be less than half the step, so that no
+    sample can belong to two grid points.
+    """
     data_step = int(np.median(np.diff(t)))
     if step is None:
         step_ns = _infer_step(data_step, src)
@@ -99,23 +108,35 @@ def _make_grid(t, step, tzinfo, src, notes) -> _Grid:
         if step_ns <= 0 or _DAY_NS % step_ns:
             raise DataError(f"step must be > 0 and divide a day (e.g. '5min', '10min'), "
                             f"found {step!r}")
+    tol = _ON_GRID_TOL
+    if snap is not None:
+        tol = max(_ON_GRID_TOL, _timedelta(snap, "snap").value)
+        if 2 * tol >= step_ns:
+            raise DataError(f"snap must be less than half the step "
+                            f"({pd.Timedelta(step_ns // 2)}), found {snap!r}")
     # grid points sit on multiples of the step counted from local midnight
     off = int(pd.Timestamp(t[0], tz="UTC").tz_convert(tzinfo).utcoffset().total_seconds() * 1e9)
-    g0 = -((-(t[0] + off - _ON_GRID_TOL)) // step_ns) * step_ns - off     # ceil
-    g1 = ((t[-1] + off + _ON_GRID_TOL) // step_ns) * step_ns - off        # floor
+    g0 = -((-(t[0] + off - tol)) // step_ns) * step_ns - off     # ceil
+    g1 = ((t[-1] + off + tol) // step_ns) * step_ns - off        # floor
     if g1 < g0:
         raise DataError(f"{src}: data span {pd.Timedelta(int(t[-1] - t[0]))} is shorter "
                         f"than one step {pd.Timedelta(step_ns)}")
     grid = np.arange(g0, g1 + 1, step_ns, dtype=np.int64)
     r = (t - g0) % step_ns
-    off_grid = int((np.minimum(r, step_ns - r) > _ON_GRID_TOL).sum())
+    dist = np.minimum(r, step_ns - r)
+    off_grid = int((dist > tol).sum())
+    snapped = int(((dist > _ON_GRID_TOL) & (dist <= tol)).sum())
     index = pd.DatetimeIndex(pd.to_datetime(grid, unit="ns", utc=True)).tz_convert(tzinfo)
     index.name = "time"
-    return _Grid(grid, index, step_ns, data_step, off_grid, 1.5 * max(step_ns, data_step))
+    return _Grid(grid, index, step_ns, data_step, off_grid, 1.5 * max(step_ns, data_step),
+                 snapped, tol)
 
 
-def _regrid(t, v, grid, bridge, gap_ns):
-    """Values of one column on the grid and how each was obtained (``_EXACT``...)."""
+def _regrid(t, v, grid, bridge, gap_ns, snap=_ON_GRID_TOL):
+    """Values of one column on the grid and how each was obtained (``_EXACT``...).
+
+    A grid point with a valid sample within ``snap`` [ns] takes the nearest such sample.
+    """
     ok = np.isfinite(v)
     tv, vv = t[ok], v[ok]
     n = len(tv)
@@ -125,7 +146,7 @@ def _regrid(t, v, grid, bridge, gap_ns):
     dp = np.where(has_p, (grid - tv[jp]).astype(float), np.inf)
     dn = np.where(has_n, (tv[jn] - grid).astype(float), np.inf)
     span = dp + dn
-    exact = np.minimum(dp, dn) <= _ON_GRID_TOL
+    exact = np.minimum(dp, dn) <= snap
     with np.errstate(invalid="ignore", divide="ignore"):
         lin = vv[jp] + (vv[jn] - vv[jp]) * (dp / span)
     out = np.where(exact, np.where(dp <= dn, vv[jp], vv[jn]), lin)

@@ -41,7 +41,7 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
                       gap_limit="30min", tz=None, name: str | None = None, *,
                       sep: str = ",", time_format: str | None = None,
                       allow_odd_units: bool = False,
-                      average_conflicts: bool = False) -> Measurements:
+                      average_conflicts: bool = False, snap=None) -> Measurements:
     """Read measured data (CSV, parquet or a DataFrame) onto a regular SI grid.
 
     Parameters
@@ -82,6 +82,11 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
         Repeated time stamps whose rows disagree (a clock set back, a daylight-saving
         hour exported without offsets) are an error naming the time range; with this
         flag they are averaged, with a :class:`~thermctl.errors.DataWarning`.
+    snap : str or Timedelta, optional
+        A stamp this close to a grid point is that point's sample, taken as is (a BAS
+        that polls every 5 min and stamps each row up to 20 s late or early: ``"30s"``);
+        less than half the step. Default 1 s: a stamp further off the grid is used only
+        through linear interpolation in time, which blends neighbouring rows.
 
     Returns
     -------
@@ -147,12 +152,12 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
         raise DataError(f"{src}: need at least 2 distinct time stamps, found {len(t)}")
 
     # grid
-    grid = _make_grid(t, step, tzinfo, src, notes)
+    grid = _make_grid(t, step, tzinfo, src, notes, snap)
     index = grid.index
     frame, counts, gaps = {}, {c: {} for c in range(4)}, []
     for fcol, v in raw.items():
         scol = cols["used"][fcol]
-        vals, code = _regrid(t, v.to_numpy(), grid.times, grid.bridge, gap_ns)
+        vals, code = _regrid(t, v.to_numpy(), grid.times, grid.bridge, gap_ns, grid.snap)
         frame[fcol] = vals
         for c in range(4):
             counts[c][scol] = int((code == c).sum())
@@ -167,7 +172,8 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
         time_zone=str(tzinfo), step=grid.step_ns / 1e9, step_inferred=step is None,
         data_step=grid.data_step / 1e9, start=index[0], end=index[-1], n_samples=len(index),
         rows_out_of_order=out_of_order, duplicates_removed=n_dups,
-        duplicate_conflicts=conflicts, off_grid_stamps=grid.off_grid, missing_cells=missing,
+        duplicate_conflicts=conflicts, off_grid_stamps=grid.off_grid,
+        snapped_stamps=grid.snapped, snap=grid.snap / 1e9, missing_cells=missing,
         exact=counts[_EXACT], resampled=counts[_RESAMPLED], interpolated=counts[_FILLED],
         excluded=counts[_EXCLUDED], long_gaps=gaps, clipped_flows=clipped, notes=notes)
     if gaps:

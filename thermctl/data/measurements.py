@@ -98,8 +98,14 @@ class QualityReport:
         Rows sorted into place; rows dropped as repeated stamps; repeated stamps whose
         rows disagreed (averaged).
     off_grid_stamps : int
-        Distinct stamps more than 1 s off the grid (used only through interpolation;
+        Distinct stamps more than ``snap`` off the grid (used only through interpolation;
         unused when the grid is coarser than the data).
+    snapped_stamps : int
+        Distinct stamps more than 1 s but at most ``snap`` off a grid point, taken as
+        that point's sample.
+    snap : float
+        Distance from a grid point within which a stamp is its sample [s] (1 unless
+        ``read_measurements(snap=)``).
     missing_cells : dict
         Column → empty/NaN cells in the file.
     exact, resampled, interpolated, excluded : dict
@@ -129,6 +135,8 @@ class QualityReport:
     duplicates_removed: int = 0
     duplicate_conflicts: int = 0
     off_grid_stamps: int = 0
+    snapped_stamps: int = 0
+    snap: float = 1.0
     missing_cells: dict = field(default_factory=dict)
     exact: dict = field(default_factory=dict)
     resampled: dict = field(default_factory=dict)
@@ -163,7 +171,9 @@ class QualityReport:
             f"grid: {self.n_samples} samples × {len(self.columns_used)} columns; "
             f"{self.duplicates_removed} duplicate rows removed "
             f"({self.duplicate_conflicts} conflicting, averaged); "
-            f"{self.rows_out_of_order} rows out of order; {self.off_grid_stamps} off-grid stamps",
+            f"{self.rows_out_of_order} rows out of order; {self.off_grid_stamps} off-grid stamps"
+            + (f", {self.snapped_stamps} snapped to their grid point (within {self.snap:g} s)"
+               if self.snapped_stamps else ""),
             f"samples: {total(self.resampled)} resampled between stamps, "
             f"{total(self.interpolated)} interpolated across short gaps, "
             f"{total(self.excluded)} excluded in {len(self.long_gaps)} long gap(s); "
