@@ -769,24 +769,23 @@ class LikelihoodProblem:
             f = ca.dot(wcol, self._col_terms.T)
             self._hess["weighted"] = ca.Function("wnll_grad", [self._eta, wcol],
                                                  [ca.gradient(f, self._eta)])
-        per = max(1, int(round(block / self.data.dt)))
-        bid = np.where(self.tmap >= 0, self.tmap // per, -1)
-        ids = sorted({int(b) for b, m in zip(bid, self.mask) if b >= 0 and m > 0})
+        bid = self._block_ids(block)
         eta = np.asarray(eta, float)
+        ids = np.unique(bid[bid >= 0])
         G = np.empty((len(ids), len(self.layout)))
         for r, b in enumerate(ids):
-            w = ((bid == b) & (self.mask > 0)).astype(float)
-            G[r] = np.asarray(self._hess["weighted"](eta, w), dtype=float).ravel()
+            G[r] = np.asarray(self._hess["weighted"](eta, (bid == b).astype(float)),
+                              dtype=float).ravel()
         return G
 
-    def block_nll(self, eta, block: float = 86400.0) -> tuple[np.ndarray, np.ndarray]:
-        """The likelihood's contributions of consecutive time blocks.
+    def _block_ids(self, block: float) -> np.ndarray:
+        """Block number (data row // rows per block) of every layout column; -1 where the
+        column holds no observation that counts."""
+        per = max(1, int(round(block / self.data.dt)))
+        return np.where((self.tmap >= 0) & (self.mask > 0), self.tmap // per, -1)
 
-        Parameters
-        ----------
-        eta : array_like
-        block : float
-            Block length [s] (blocks follow the data rows from the first sample).
+    def block_nll(self, eta, block: float = 86400.0) -> tuple[np.ndarray, np.ndarray]:
+        """The likelihood's contributions of consecutive time blocks (as :meth:`block_scores`).
 
         Returns
         -------
@@ -798,10 +797,9 @@ class LikelihoodProblem:
         if "col_terms" not in self._hess:
             self._hess["col_terms"] = ca.Function("col_terms", [self._eta], [self._col_terms])
         cols = np.asarray(self._hess["col_terms"](np.asarray(eta, float)), dtype=float).ravel()
-        per = max(1, int(round(block / self.data.dt)))
-        keep = (self.tmap >= 0) & (self.mask > 0)
-        bid = self.tmap[keep] // per
-        ids, inv = np.unique(bid, return_inverse=True)
+        bid = self._block_ids(block)
+        keep = bid >= 0
+        ids, inv = np.unique(bid[keep], return_inverse=True)
         return ids, np.bincount(inv, weights=cols[keep], minlength=len(ids))
 
     def matrices(self, eta) -> dict:
