@@ -231,5 +231,17 @@ def test_an_edge_below_the_threshold_is_dropped_and_the_model_refitted():
     assert out.stability is stab and stab.dropped == ["air:r242-r244"]
     assert "below the stability threshold 0.6" in out.reasons["air:r242-r244"]
     assert "chosen on 100% of 5" in out.reasons["air:r240-r243"]
-    assert "dropped air:r242-r244" in notes[0] and "\n" not in notes[0]
+    note = next(n for n in notes if n.startswith("stability selection ("))
+    assert "dropped air:r242-r244" in note and "\n" not in note
     assert sel.edges != out.edges                     # the full data's selection is kept
+
+
+def test_resamples_shorter_than_three_days_are_called_out():
+    from thermctl.identify import _stability_short_note
+    rs = [StabilityResample(0, ["2011-01-21", "2011-01-22"], [])]
+    notes = []
+    _stability_short_note(StabilityResult({}, rs, 0.5, 2, 0, 0.0, 0.0), notes)
+    assert len(notes) == 1 and "only 2 day(s)" in notes[0] and "\n" not in notes[0]
+    rs = [StabilityResample(0, [f"2011-01-2{i}" for i in range(1, 7)], [])]
+    _stability_short_note(StabilityResult({}, rs, 0.5, 2, 0, 0.0, 0.0), notes)
+    assert len(notes) == 1
