@@ -405,7 +405,9 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
         return _identify_local(meas, cal, val, opt, progress, client)
     else:
         ident = _identify_greybox(meas, cal, val, opt, progress)
-    if client is not None or opt.split.scheduler or opt.split.workers:
+    # --workers also runs the stability resamples of a whole building in parallel
+    if client is not None or opt.split.scheduler or (opt.split.workers
+                                                     and not opt.selection.stability):
         ident.notes.append(f"--workers/--scheduler apply to local problems only; this building "
                            f"({len(meas.spec.measured_zones)} measured zones, --scale "
                            f"{opt.split.scale}) was identified as a whole in this process")

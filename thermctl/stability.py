@@ -156,8 +156,9 @@ def resample_days(frame, resamples: int, *, fraction: float = 0.5, block_days: i
     resamples : int
         Number of resamples, >= 1.
     fraction : float
-        Fraction of the blocks kept, in (0, 1) [-]; at least one block is kept and at least
-        one left out. Meinshausen & Bühlmann subsample half the data.
+        Fraction of the blocks kept, in (0, 1) [-]: ``round(fraction × blocks)`` of them
+        (half of 5 blocks: 2), at least one kept and at least one left out. Meinshausen &
+        Bühlmann subsample half the data.
     block_days : int
         Consecutive calendar days per block [d] (the last block may be shorter).
     seed : int
