@@ -211,7 +211,7 @@ def study(building: str, days: float, seed: int, mess_seed: int, single=(), out=
             path = Path(tmp) / f"{name.replace(' ', '_')}.csv"
             path.write_text(text)
             r = _run(path, tb.spec, name, **read_kw)
-            r["log"] = log
+            r["log"], r["dir"] = log, str(tmp) + os.sep
             rows.append(r)
             if name == "clean":
                 print(HEAD, file=out)
@@ -227,7 +227,7 @@ def study(building: str, days: float, seed: int, mess_seed: int, single=(), out=
             print(f"   mess: {r['log']}", file=out)
         print(f"   calibration {r['cal'][0]} to {r['cal'][1]}", file=out)
         for line in r["quality"].summary().splitlines():
-            print("   | " + line.replace(str(Path(tempfile.gettempdir())), "$TMP"), file=out)
+            print("   | " + line.replace(r["dir"], ""), file=out)
         for note in r["notes"]:
             print(f"   note: {str(note)[:300]}", file=out)
     out.flush()
