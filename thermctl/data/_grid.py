@@ -7,7 +7,7 @@ All times here are int64 nanoseconds since the epoch (UTC); durations are ns too
   below one minute).
 * The grid is aligned to local midnight of the data's time zone and runs from the first
   grid point at or after the first stamp to the last one at or before the last stamp
-  (each with 1 s tolerance).
+  (each with 1 s tolerance, or ``snap``).
 * A grid point with a valid sample within 1 s (within ``snap``, when the reader is given
   one: a trend log polled with jitter) takes that sample; otherwise the value is
   interpolated linearly between the valid samples before and after it. The time between
