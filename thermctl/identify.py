@@ -104,8 +104,8 @@ class SelectionOptions:
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the
         same selection; every candidate's selection frequency is reported and a selected
         edge chosen on fewer than ``stability_threshold`` of them is dropped (the final
-        model refitted without it). 0: off. B = 10 costs 2.3–2.6× a default identification
-        in CPU (one resample ~10–12 s on the 7-zone testbed; docs/identification.md,
+        model refitted without it). 0: off. B = 10 costs 2.3–5.3× a default identification
+        in CPU (one resample ~9–17 s on the 7-zone testbed; docs/identification.md,
         "Stability selection"), hence off by default.
     stability_threshold : float
         Frequency an edge needs to stay [-]. Meinshausen & Bühlmann (2010) use 0.6–0.9;

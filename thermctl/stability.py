@@ -43,8 +43,10 @@ STABILITY_THRESHOLD = 0.6
 """Frequency below which a selected edge is dropped [-]. Meinshausen & Bühlmann (2010)
 bound the expected number of false selections for thresholds in 0.6–0.9 and find the
 results insensitive within that range; 0.6, the low end, drops an edge only when the
-selection leaves it out on at least 40 % of the half-data resamples. Measured on the testbed
-(docs/identification.md, "Stability selection")."""
+selection leaves it out on at least 40 % of the half-data resamples. Measured on the 7-zone
+testbed with B = 10 (docs/identification.md, "Stability selection"): true paths 0.7–1.0 on
+14–16 days (0.8 would have dropped one), 0.3 for the weakest on 12 days; a spurious path
+1.0 on 16 days, 0.2 on 12."""
 
 
 @dataclass

@@ -103,7 +103,7 @@ def identify(
                                   "resamples of half the calibration days (blocks of 2 days); "
                                   "a selected air path chosen on fewer than "
                                   "--stability-threshold of them is dropped. 0: off (B=10 costs "
-                                  "about 2.5x a default identification)."),
+                                  "2.3-5.3x a default identification)."),
     stability_threshold: float = typer.Option(_D.selection.stability_threshold,
                                               "--stability-threshold", help="--stability: "
                                               "selection frequency an air path needs to stay "
