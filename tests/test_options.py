@@ -149,7 +149,7 @@ def test_identify_carries_the_fitted_wall_factors_into_the_model():
     import numpy as np
 
     from thermctl.data import read_measurements
-    from thermctl.estimate.likelihood.problem import wall_class
+    from thermctl.spec import wall_class
     from thermctl.identify import identify
     from thermctl.testbed import generate
     tb = generate("pugh-hall", days=12, seed=1, wall_factor={"partition": 2.0})

@@ -57,6 +57,24 @@ def is_outdoor(name: str) -> bool:
     return name.lower() in OUTDOOR_NAMES
 
 
+WALL_CLASSES = ("exterior", "partition", "boundary")
+"""Classes of walls by what they join (:func:`wall_class`)."""
+
+
+def wall_class(a: str, b: str, zones) -> str:
+    """Class of a wall between nodes ``a`` and ``b`` (``zones``: the zone names).
+
+    ``exterior``: one end is an outdoor boundary node (:func:`is_outdoor`); ``partition``:
+    both ends are zones; ``boundary``: one end is another boundary node (cellar, attic,
+    floor above, a neighbour's space).
+    """
+    if is_outdoor(a) or is_outdoor(b):
+        return "exterior"
+    if a in zones and b in zones:
+        return "partition"
+    return "boundary"
+
+
 _TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances"}
 _ZONE_KEYS = {"volume", "measured", "capacitance"}
 _WALL_KEYS = {"between", "R", "C", "area", "u_value", "heat_capacity", "name"}

@@ -352,7 +352,7 @@ def generate(building="pugh-hall", *, days: float = 26, step_minutes: float = 5,
         the plant's. Every plant (``rc``, ``rc-exact``, ``fd``) uses it. Default: none.
     wall_factor : dict, optional
         Walls of uncertain construction: ``{class: f}`` (classes ``exterior``,
-        ``partition``, ``boundary`` of :func:`thermctl.estimate.likelihood.problem.wall_class`)
+        ``partition``, ``boundary`` of :func:`thermctl.spec.wall_class`)
         multiplies the plant's conductances of every wall of that class by f (all three
         resistances ``R/f``, capacities kept); the spec returned keeps the published walls.
         Every plant uses it. Default: none.
@@ -568,7 +568,7 @@ def _with_internal_mass(spec: BuildingSpec, factor) -> BuildingSpec:
 
 def _with_wall_factor(spec: BuildingSpec, factor) -> BuildingSpec:
     """``spec`` with the walls of each class in ``factor`` (``{class: f}``) at ``R/f``."""
-    from ..estimate.likelihood.problem import WALL_CLASSES, wall_class
+    from ..spec import WALL_CLASSES, wall_class
 
     if not isinstance(factor, dict):
         raise SpecError(f"wall_factor: expected {{class: factor}} with classes {WALL_CLASSES}, "

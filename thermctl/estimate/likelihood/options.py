@@ -115,7 +115,7 @@ class LikelihoodOptions:
         A fitted UA factor per wall class, ``ua_factor[exterior]``, ``ua_factor[partition]``,
         ``ua_factor[boundary]`` (only the classes the network has): walls of uncertain
         construction, for a user who knows the floor plan but not the U-values. Classes
-        (:func:`.problem.wall_class`): ``exterior`` = a wall to an outdoor boundary node
+        (:func:`thermctl.spec.wall_class`): ``exterior`` = a wall to an outdoor boundary node
         (:func:`thermctl.spec.is_outdoor`), ``partition`` = between two zones,
         ``boundary`` = to any other boundary node (cellar, attic, a neighbour's space, the
         floor above). A factor f multiplies the conductance 1/R of all three resistances

@@ -31,7 +31,7 @@ paper's :math:`t_{min}/\alpha \le \tau_0 \le t_{max}/\alpha`), noise intensities
 basis of the gains (occupied/unoccupied levels or Fourier terms); with
 ``internal_mass`` a capacity factor f_z >= 1 per measured zone (``C_z → f_z·C_z``: every
 term of the zone's equation, noise included, is divided by f_z); with ``wall_factors`` a
-UA factor per wall class (:func:`wall_class`: every conductance of those walls times f,
+UA factor per wall class (:func:`thermctl.spec.wall_class`: every conductance of those walls times f,
 ``R → R/f``; their capacities kept).
 """
 
@@ -49,7 +49,7 @@ import scipy.sparse as sp
 from ...errors import DataError, EstimationError
 from ...model import RBAR_V_PAPER, ConvectionParameters, ThermalModel
 from ...network import ThermalNetwork
-from ...spec import is_outdoor
+from ...spec import WALL_CLASSES, is_outdoor, wall_class
 from . import kalman
 from ..data import EstimationData
 from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
@@ -62,24 +62,6 @@ __all__ = ["LikelihoodOptions", "LikelihoodProblem", "T_MIN", "T_MAX", "RBAR_BOU
 log = logging.getLogger(__name__)
 
 _KW = 1e-3                      # gains and heat inputs are in kW inside: states O(0.1–1)
-
-WALL_CLASSES = ("exterior", "partition", "boundary")
-"""Wall classes of ``LikelihoodOptions.wall_factors``, in parameter order."""
-
-
-def wall_class(a: str, b: str, zones) -> str:
-    """Class of a wall between nodes ``a`` and ``b`` (``zones``: the network's zone names).
-
-    ``exterior``: one end is an outdoor boundary node (:func:`thermctl.spec.is_outdoor`);
-    ``partition``: both ends are zones; ``boundary``: one end is another boundary node
-    (cellar, attic, floor above, a neighbour's space).
-    """
-    if is_outdoor(a) or is_outdoor(b):
-        return "exterior"
-    if a in zones and b in zones:
-        return "partition"
-    return "boundary"
-
 
 class LikelihoodProblem:
     """Likelihood and k-step criterion of a network model on data, as CasADi functions.
