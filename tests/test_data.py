@@ -180,7 +180,7 @@ def test_irregular_stamps_resampled(small_spec):
     df["time"] = [s.isoformat() for s in t]
     for col in df.columns[1:-1]:
         df[col] = truth(col, t)
-    meas = read_quiet(df, small_spec)
+    meas = read_quiet(df, small_spec, snap=None)     # 1 s: interpolate every jittered stamp
     q = meas.quality
     assert meas.step == pd.Timedelta("5min")
     n_off = int((jitter != 0).sum())
@@ -601,3 +601,26 @@ def test_quality_report_serialises(small_spec):
     text = meas.quality.summary()
     assert "120 excluded in 10 long gap(s)" in text and "long gap T:r1" in text
     assert isinstance(meas, Measurements) and "576 samples" in repr(meas)
+
+
+def test_default_snap_takes_a_jittered_stamp_as_its_grid_sample(small_spec):
+    """By default a stamp within a tenth of the step (30 s at 5 min) is its grid point's
+    sample as is; one further off is still interpolated."""
+    df = linear_frame()
+    t = pd.to_datetime(df["time"])
+    jitter = np.zeros(len(df), dtype=int)
+    jitter[5], jitter[9] = 20, -29          # snapped
+    jitter[13] = 40                         # > 30 s: interpolated
+    t = t + pd.to_timedelta(jitter, unit="s")
+    df["time"] = [s.isoformat() for s in t]
+    for col in df.columns[1:-1]:
+        df[col] = truth(col, t)
+    meas = read_quiet(df, small_spec)
+    q = meas.quality
+    assert q.snapped_stamps == 2 and q.off_grid_stamps == 1 and q.snap == 30.0
+    col = meas.frame.columns[0]
+    # the snapped slots hold the jittered samples' own values
+    for k in (5, 9):
+        assert meas.frame[col].iloc[k] == pytest.approx(truth(col, t[k:k + 1])[0], rel=1e-12)
+        assert meas.frame[col].iloc[k] != pytest.approx(truth(col, meas.frame.index[k:k + 1])[0],
+                                                        rel=1e-9)

@@ -59,7 +59,7 @@ def four_days(bench, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("messy")
     return dict(tb=tb, clean_text=clean, messy_text=messy, log=log,
                 clean=_read(clean, tmp, "clean", tb.spec),
-                messy=_read(messy, tmp, "messy", tb.spec),
+                messy=_read(messy, tmp, "messy", tb.spec, snap=None),
                 snapped=_read(messy, tmp, "messy_snap", tb.spec, snap="30s"))
 
 
@@ -135,7 +135,8 @@ def test_jittered_stamps_snap_to_their_slot(four_days):
 
 
 def test_one_jittered_row_maps_to_its_slot(tmp_path, bench):
-    """A row stamped 00:05:17 is the 00:05 sample with snap, a blend of rows without."""
+    """A row stamped 00:05:17 is the 00:05 sample with snap (the default: a tenth of the
+    step), a blend of rows with the 1-s tolerance (``snap=None``)."""
     tb, clean = _export(1)
     lines = clean.split("\n")
     stamp = pd.Timestamp(lines[2].split(",", 1)[0])
@@ -146,7 +147,8 @@ def test_one_jittered_row_maps_to_its_slot(tmp_path, bench):
     want = float(lines[2].split(",")[lines[0].split(",").index(col)])
     snapped = _read(text, tmp_path, "snap", tb.spec, snap="30s")
     assert snapped.frame.loc[stamp, col] == want and snapped.quality.snapped_stamps == 1
-    plain = _read(text, tmp_path, "plain", tb.spec)
+    assert _read(text, tmp_path, "default", tb.spec).frame.loc[stamp, col] == want
+    plain = _read(text, tmp_path, "plain", tb.spec, snap=None)
     assert plain.quality.off_grid_stamps == 1 and plain.quality.resampled[col] == 1
     with pytest.raises(DataError, match="snap must be less than half the step"):
         _read(text, tmp_path, "bad", tb.spec, snap="150s")

@@ -92,8 +92,8 @@ def _infer_step(data_step: int, src) -> int:
 def _make_grid(t, step, tzinfo, src, notes, snap=None) -> _Grid:
     """The grid for sorted distinct stamps ``t`` [ns]; appends a note if the step is rounded.
 
-    ``snap`` [ns or anything :func:`_timedelta` reads] widens the 1 s within which a stamp
-    is on a grid point (also for the first and last grid point: a first stamp 10 s late
+    ``snap`` [ns or anything :func:`_timedelta` reads; ``"auto"``: a tenth of the step;
+    None: 1 s] widens the 1 s within which a stamp is on a grid point (also for the first and last grid point: a first stamp 10 s late
     still starts the grid at its slot); it must be less than half the step, so that no
     sample can belong to two grid points.
     """
@@ -109,7 +109,10 @@ def _make_grid(t, step, tzinfo, src, notes, snap=None) -> _Grid:
             raise DataError(f"step must be > 0 and divide a day (e.g. '5min', '10min'), "
                             f"found {step!r}")
     tol = _ON_GRID_TOL
-    if snap is not None:
+    if isinstance(snap, str) and snap == "auto":
+        # a tenth of the step (30 s at 5 min): a polled log's jitter, far from the next slot
+        tol = max(_ON_GRID_TOL, step_ns // 10)
+    elif snap is not None:
         tol = max(_ON_GRID_TOL, _timedelta(snap, "snap").value)
         if 2 * tol >= step_ns:
             raise DataError(f"snap must be less than half the step "

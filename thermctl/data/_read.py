@@ -41,7 +41,7 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
                       gap_limit="30min", tz=None, name: str | None = None, *,
                       sep: str = ",", time_format: str | None = None,
                       allow_odd_units: bool = False,
-                      average_conflicts: bool = False, snap=None) -> Measurements:
+                      average_conflicts: bool = False, snap="auto") -> Measurements:
     """Read measured data (CSV, parquet or a DataFrame) onto a regular SI grid.
 
     Parameters
@@ -82,11 +82,15 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
         Repeated time stamps whose rows disagree (a clock set back, a daylight-saving
         hour exported without offsets) are an error naming the time range; with this
         flag they are averaged, with a :class:`~thermctl.errors.DataWarning`.
-    snap : str or Timedelta, optional
+    snap : "auto", str, Timedelta or None
         A stamp this close to a grid point is that point's sample, taken as is (a BAS
-        that polls every 5 min and stamps each row up to 20 s late or early: ``"30s"``);
-        less than half the step. Default 1 s: a stamp further off the grid is used only
-        through linear interpolation in time, which blends neighbouring rows.
+        that polls every 5 min and stamps each row up to 20 s late or early); less than
+        half the step. ``"auto"`` (default): a tenth of the step (30 s at 5 min). None:
+        1 s, so that a stamp further off the grid is used only through linear
+        interpolation in time — which blends neighbouring rows, and so makes up supply
+        flows between two box positions that never happened: on a messy export of a
+        16-day testbed log (stamps jittered by up to 20 s), interpolation changed 1–2 air
+        paths of the identified structure, snapping none (benchmarks/results/messy.txt).
 
     Returns
     -------
