@@ -37,16 +37,14 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import time
 import uuid
 import warnings
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures import as_completed as cf_as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._parallel import run_tasks
 from .errors import BoundWarning, ConvergenceWarning, DataError, EstimationError
 from .network import ThermalNetwork, air_path_name
 from .spec import BuildingSpec, Distance, Zone
@@ -583,18 +581,8 @@ def run_local(problems, frame, *, workers: int | None = None, client=None, progr
             if own:
                 client.close()
     else:
-        workers = (os.cpu_count() or 1) if workers is None else int(workers)
-        if workers < 1:
-            raise EstimationError(f"workers must be >= 1, found {workers}")
-        if workers == 1 or n == 1:
-            for i in range(n):
-                done(i, _fit_task(problems[i], problems[i].data(frames[i]), kwargs))
-        else:
-            with ProcessPoolExecutor(max_workers=min(workers, n)) as pool:
-                futs = {pool.submit(_fit_task, problems[i], problems[i].data(frames[i]),
-                                    kwargs): i for i in order}
-                for fut in cf_as_completed(futs):
-                    done(futs[fut], fut.result())
+        run_tasks(_fit_task, [(p, p.data(f), kwargs) for p, f in zip(problems, frames)],
+                  workers=workers, order=order, on_done=done)
     return [results[i] for i in range(n)]
 
 

@@ -24,14 +24,12 @@ half of the days are often fewer.
 from __future__ import annotations
 
 import logging
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures import as_completed as cf_as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._parallel import run_tasks
 from .errors import DataError, EstimationError
 
 __all__ = ["StabilityResult", "StabilityResample", "resample_days", "stability_selection",
@@ -304,17 +302,8 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
         say("stability resamples", k, n)
 
     say("stability resamples", 0, n)
-    workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if workers < 1:
-        raise EstimationError(f"workers must be >= 1, found {workers}")
-    if workers == 1 or n == 1:
-        for b in range(n):
-            done(_select_task(b, spec, meas(b), kw))
-    else:
-        with ProcessPoolExecutor(max_workers=min(workers, n)) as pool:
-            futs = [pool.submit(_select_task, b, spec, meas(b), kw) for b in range(n)]
-            for fut in cf_as_completed(futs):
-                done(fut.result())
+    run_tasks(_select_task, [(b, spec, meas(b), kw) for b in range(n)], workers=workers,
+              on_done=lambda i, res: done(res))
     names = set(names) | {e for r in out for e in r.edges}
     return StabilityResult(_frequencies(names, out), out, fraction, int(block_days), int(seed),
                            time.perf_counter() - t0, float(sum(r.cpu for r in out)))
