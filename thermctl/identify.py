@@ -570,13 +570,11 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     from .local import identify_local
 
     li = identify_local(meas.spec, cal.frame, rule=opt.split.combine,
-                        criterion=opt.selection.criterion, margin=opt.selection.margin,
-                        solar=opt.estimation.solar, workers=opt.split.workers,
-                        internal_mass=opt.estimation.internal_mass,
+                        workers=opt.split.workers, **_local_fit_options(opt),
                         client=client or opt.split.scheduler, progress=progress,
-                        fit_rows=opt.split.rows, latent_depth=opt.split.latent_depth,
+                        latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
-                        s_min=opt.structure.s_min, min_t=opt.selection.min_t)
+                        s_min=opt.structure.s_min)
     return _finish_local(meas, cal, val, opt, li, progress, client)
 
 
@@ -691,10 +689,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             owner += [k] * len(ps)
         t0 = _time.perf_counter()
         results = run_local(problems, frames, workers=opt.split.workers, client=client,
-                            progress=progress, criterion=opt.selection.criterion,
-                            margin=opt.selection.margin, solar=opt.estimation.solar,
-                            internal_mass=opt.estimation.internal_mass,
-                            fit_rows=opt.split.rows, min_t=opt.selection.min_t) if problems else []
+                            progress=progress, **_local_fit_options(opt)) if problems else []
         wall = _time.perf_counter() - t0
         out = {}
         for k in local:
@@ -720,11 +715,8 @@ def _local_stability(li, cal, opt, progress, client, notes):
     thr = opt.selection.stability_threshold
     stab = stability_local(li.problems, cal.frame, resamples=opt.selection.stability,
                            seed=opt.selection.stability_seed, rule=li.rule,
-                           margin=opt.selection.margin, workers=opt.split.workers,
-                           client=client or opt.split.scheduler, progress=progress,
-                           criterion=opt.selection.criterion, solar=opt.estimation.solar,
-                           internal_mass=opt.estimation.internal_mass,
-                           fit_rows=opt.split.rows, min_t=opt.selection.min_t)
+                           workers=opt.split.workers, client=client or opt.split.scheduler,
+                           progress=progress, **_local_fit_options(opt))
     dropped = stab.below(li.edges, thr)
     stab.dropped = dropped
     _stability_short_note(stab, notes)
@@ -822,6 +814,14 @@ def _drop_unstable(spec, cal, opt, sel, stab, notes):
             ThermalNetwork(spec, kept), opt.estimation.criterion, solar=opt.estimation.solar,
             **_mass_options(opt)).fit(cal, init=init)
     return out
+
+
+def _local_fit_options(opt) -> dict:
+    """What every local fit is asked (:func:`thermctl.local.fit_local`'s keywords), one place
+    for the local path, ``identify_many`` and the stability resamples."""
+    return dict(criterion=opt.selection.criterion, margin=opt.selection.margin,
+                solar=opt.estimation.solar, internal_mass=opt.estimation.internal_mass,
+                fit_rows=opt.split.rows, min_t=opt.selection.min_t)
 
 
 def _fitted_network(gb):
