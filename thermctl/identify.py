@@ -54,6 +54,12 @@ class StructureOptions:
     allow_parallel : bool
         ``selection.method="scores"``: keep zone pairs joined by a wall as candidates.
         The model-based selection always offers them (an open door beside a wall).
+    scope : {"auto", "building", "neighbourhood"}
+        Concentration graphs of the paper's pipeline: one over every measured zone
+        (needs ``n + 2`` complete days for ``n`` zones), or one per zone's neighbourhood
+        (:class:`thermctl.structure.NeighbourhoodStructureIdentifier`, ``|neighbourhood|
+        + 2`` days, any building size). ``auto``: the building's when its days suffice,
+        else the neighbourhoods'.
     """
 
     method: str = "sin"
@@ -61,9 +67,11 @@ class StructureOptions:
     rule: str = "paper"
     s_min: float = 0.25
     allow_parallel: bool = False
+    scope: str = "auto"
 
     def check(self):
         _one_of("structure", "method", self.method, ("sin", "glasso"))
+        _one_of("structure", "scope", self.scope, ("auto", "building", "neighbourhood"))
         _one_of("structure", "rule", self.rule, ("paper", "threshold"))
         if not 0.0 < self.level < 1.0:
             raise DataError(f"identify option structure.level must be in (0, 1), found "
@@ -434,10 +442,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     notes = []
     if progress:
         progress("structure", 0, 1)
-    st = opt.structure
-    sid = StructureIdentifier(method=st.method, level=st.level, rule=st.rule, s_min=st.s_min,
-                              allow_parallel=st.allow_parallel)
-    sid.fit(cal.frame, net0)
+    sid = _paper_structure(cal, net0, opt.structure, notes)
     if progress:
         progress("structure", 1, 1)
     net = sid.network_
@@ -451,7 +456,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
         gb, ida = _greybox_fit(net, cal, opt, notes)
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     elif opt.estimation.estimator != "none":
-        est, grid = _estimate(net, cal, opt, progress)
+        est, grid = _estimate(net, cal, opt, progress, notes)
         if est is not None:
             rbar_v, c_v = est.rbar_v, est.c_v
         else:
@@ -462,6 +467,33 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
         net = _fitted_network(gb)
     model = ThermalModel(net, rbar_v=rbar_v, c_v=c_v, meta=meta)
     return Identification(model, sid, est, grid, cal, val, opt, notes, greybox=gb, intervals=ida)
+
+
+def _paper_structure(cal, net, st, notes):
+    """The paper's structure stage on the building's concentration graphs, or on every
+    zone's neighbourhood when ``st.scope`` says so or the building's need more days."""
+    from .data.days import day_array
+    from .structure import NeighbourhoodStructureIdentifier
+    scope = st.scope
+    if scope == "auto":
+        zones = net.measured_zones
+        n_days = len(day_array(cal.frame, zones).days) if len(zones) > 1 else 0
+        scope = "building" if st.method == "glasso" or n_days >= len(zones) + 2 else "neighbourhood"
+        if scope == "neighbourhood":
+            notes.append(f"structure: SIN over the building needs {len(zones) + 2} complete "
+                         f"days for {len(zones)} measured zones, the calibration has {n_days}: "
+                         "each zone's air paths are scored on its neighbourhood's "
+                         "concentration graph instead (--scope neighbourhood)")
+    if scope == "neighbourhood":
+        if st.method != "sin":
+            raise DataError(f"identify option structure.scope='neighbourhood' needs "
+                            f"structure.method='sin', found {st.method!r}")
+        sid = NeighbourhoodStructureIdentifier(level=st.level, rule=st.rule, s_min=st.s_min,
+                                               allow_parallel=st.allow_parallel)
+    else:
+        sid = StructureIdentifier(method=st.method, level=st.level, rule=st.rule,
+                                  s_min=st.s_min, allow_parallel=st.allow_parallel)
+    return sid.fit(cal.frame, net)
 
 
 def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
@@ -966,19 +998,40 @@ def _greybox_meta(gb, ida) -> dict:
     return out
 
 
-def _estimate(net, cal, opt, progress):
+def _estimate(net, cal, opt, progress, notes=None):
     from .estimate import EstimationData
     from .estimate.simulation import CostProblem, fit, grid_search
 
-    data = EstimationData.from_frame(cal.frame, net)
-    problem = CostProblem(net, data, window=opt.estimation.window_hours * 3600.0,
-                          initial_state=opt.estimation.initial_state)
+    sp = opt.split
+    local = sp.scale == "local" or (sp.scale == "auto"
+                                    and len(net.measured_zones) > sp.local_above)
+    method = "multiple_shooting" if opt.estimation.estimator == "nlp" else "single_shooting"
+    if local:
+        # the whole building's J needs an eigendecomposition of the full state matrix per
+        # flow pattern and grid point (49 zones: the grid's first batch unfinished after
+        # 4 min); the sum of the zones' local J's needs 10-30-state ones
+        from .local import local_cost_problem
+        problem = local_cost_problem(net.spec, [(e.a, e.b, e.d) for e in net.convection_edges],
+                                     cal.frame, window=opt.estimation.window_hours * 3600.0,
+                                     initial_state=opt.estimation.initial_state,
+                                     latent_depth=sp.latent_depth)
+        if notes is not None:
+            notes.append(f"estimation: the paper's J summed over {len(problem.parts)} local "
+                         f"problems (each zone simulated with its neighbours' measured "
+                         f"temperatures; {len(net.measured_zones)} measured zones > --local-above "
+                         f"{sp.local_above})"
+                         + ("; single shooting (the parts keep their own initial states)"
+                            if method == "multiple_shooting" else ""))
+        method = "single_shooting"
+    else:
+        data = EstimationData.from_frame(cal.frame, net)
+        problem = CostProblem(net, data, window=opt.estimation.window_hours * 3600.0,
+                              initial_state=opt.estimation.initial_state)
     grid = None
     if opt.estimation.grid or opt.estimation.estimator == "grid":
         grid = grid_search(problem, progress=progress)
     est = None
     if opt.estimation.estimator in ("nlp", "single_shooting"):
-        method = "multiple_shooting" if opt.estimation.estimator == "nlp" else "single_shooting"
         theta0 = None if grid is None else (grid.best_rbar_v, grid.best_c_v)
         est = fit(problem, method=method, theta0=theta0, progress=progress)
     return est, grid

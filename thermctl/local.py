@@ -50,7 +50,7 @@ from .network import ThermalNetwork, air_path_name
 from .spec import BuildingSpec, Distance, Zone
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
-           "propose_sin", "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES"]
+           "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES"]
 
 log = logging.getLogger(__name__)
 
@@ -426,6 +426,51 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     return LocalResult(problem.zone, kept, evidence, rb, tau0, n_states, int(est.n_obs_),
                        sel.n_fits, time.perf_counter() - t0, time.process_time() - c0,
                        dict(sel.reasons))
+
+
+def local_cost_problem(spec: BuildingSpec, edges, frame, *, window: float = 12 * 3600.0,
+                       initial_state: str = "estimate", latent_depth: int | None = 1):
+    """The paper's simulation criterion of a building as a sum over its local problems.
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+        The whole building.
+    edges : iterable of (str, str, float)
+        Selected air paths ``(a, b, d)`` between measured zones.
+    frame : pandas.DataFrame
+        Calibration data (SI, regular index).
+    window : float
+        Cost window of each local problem [s] (paper: 12 h).
+    initial_state : str
+        As :class:`thermctl.estimate.simulation.CostProblem`.
+    latent_depth : int or None
+        As :func:`local_problems`.
+
+    Returns
+    -------
+    thermctl.estimate.simulation.CompositeCostProblem
+        One part per measured zone with at least one selected air path (a zone without one
+        adds a constant to J); every part uses the building's ``alpha``, so the parts share
+        the parameter bounds.
+    """
+    from .estimate import EstimationData
+    from .estimate.simulation import CompositeCostProblem, CostProblem
+
+    edges = [tuple(e) for e in edges]
+    ends = {z for a, b, _ in edges for z in (a, b)}
+    alpha = spec.alpha()
+    parts, names = [], []
+    for p in local_problems(spec, frame.columns, zones=sorted(ends), latent_depth=latent_depth):
+        mine = [e for e in edges if p.zone in e[:2]]
+        if not mine:
+            continue
+        net = ThermalNetwork(p.spec).with_convection(mine)
+        data = EstimationData.from_frame(p.data(frame), net)
+        parts.append(CostProblem(net, data, window=window, initial_state=initial_state,
+                                 alpha=alpha))
+        names.append(p.zone)
+    return CompositeCostProblem(parts, names)
 
 
 def propose_sin(problems, frame, level: float = 0.05, s_min: float = 0.25) -> tuple:

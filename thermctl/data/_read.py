@@ -37,7 +37,7 @@ _OFFSET_RE = re.compile(r"(Z|[+-]\d{2}:?\d{2})$")
 _HAS_OFFSET_RE = re.compile(r"(?:Z|[+-]\d{2}:?\d{2})$")
 
 
-def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
+def read_measurements(source, spec: BuildingSpec | str | Path, units: str = "si", step=None,
                       gap_limit="30min", tz=None, name: str | None = None, *,
                       sep: str = ",", time_format: str | None = None,
                       allow_odd_units: bool = False,
@@ -49,8 +49,8 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
     source : str, Path or pandas.DataFrame
         ``.csv`` (any other suffix is read as CSV) or ``.parquet``/``.pq`` file, or a
         DataFrame with a ``time`` column (or a ``DatetimeIndex``).
-    spec : BuildingSpec
-        Gives the zones (``T:`` needed for every measured zone) and boundary nodes
+    spec : BuildingSpec, str or Path
+        The building (a path is read with :func:`thermctl.spec.load_spec`). Gives the zones (``T:`` needed for every measured zone) and boundary nodes
         (``T:`` needed for each).
     units : {"si", "imperial"}, default "si"
         ``si``: °C, kg/s, m³/s, W, W/m². ``imperial``: °F for ``T:``/``Ts:``, CFM for
@@ -111,6 +111,12 @@ def read_measurements(source, spec: BuildingSpec, units: str = "si", step=None,
     """
     if units not in ("si", "imperial"):
         raise DataError(f"units must be 'si' or 'imperial', found {units!r}")
+    if isinstance(spec, (str, Path)):
+        from ..spec import load_spec
+        spec = load_spec(spec)
+    elif not isinstance(spec, BuildingSpec):
+        raise DataError(f"read_measurements: spec must be a BuildingSpec or the path of a "
+                        f"building YAML, found {type(spec).__name__}")
     df, src, row_label = _load_table(source, name, sep)
     cols = _classify(df.columns, spec, src)
     t_ns, tzinfo, notes = _parse_time(df["time"], src, tz, row_label, time_format)

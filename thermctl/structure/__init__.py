@@ -43,8 +43,10 @@ of day shaping is :func:`thermctl.data.day_array` (re-exported here).
 from ..data.days import DayArray, day_array
 from .glasso import graphical_lasso_batch, level_penalty
 from .identifier import StructureIdentifier
+from .neighbourhood import NeighbourhoodStructureIdentifier, neighbourhood_scores
 from .selection import ScoredEdge, select_edges
 from .sin import partial_correlations, sin_pvalues
 
-__all__ = ["DayArray", "ScoredEdge", "StructureIdentifier", "day_array", "partial_correlations",
+__all__ = ["DayArray", "NeighbourhoodStructureIdentifier", "ScoredEdge", "StructureIdentifier",
+           "neighbourhood_scores", "day_array", "partial_correlations",
            "sin_pvalues", "graphical_lasso_batch", "level_penalty", "select_edges"]

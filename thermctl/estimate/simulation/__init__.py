@@ -34,6 +34,7 @@ Examples
 True
 """
 
+from .composite import CompositeCostProblem
 from .fit import METHODS, SimulationEstimator, fit
 from .grid import grid_search
 from .identifiability import identifiability_report
@@ -45,7 +46,7 @@ from .result import EstimationResult, GridResult, ProfileReport, ParameterProfil
 from .sim import CostEval, ExactSimulator, Simulator
 
 __all__ = [
-    "CostProblem", "grid_search", "fit", "SimulationEstimator",
+    "CostProblem", "CompositeCostProblem", "grid_search", "fit", "SimulationEstimator",
     "identifiability_report", "Simulator", "ExactSimulator", "RadauSimulator", "CostEval",
     "MultipleShootingNLP", "CasadiMultipleShootingNLP", "SingleShootingNLP",
     "EstimationResult", "GridResult", "ProfileReport", "ParameterProfile",

@@ -106,6 +106,10 @@ class RadauSimulator(Simulator):
 
     def __init__(self, problem, substeps: int | None = None):
         super().__init__(problem)
+        if self.b_varies:
+            raise EstimationError("the Radau simulator needs air paths between states only; "
+                                  "an air path to a boundary node (a local problem's "
+                                  "neighbour) needs simulator='exact'")
         self.substeps = default_substeps(problem.dt) if substeps is None else int(substeps)
         if self.substeps < 1:
             raise EstimationError(f"substeps must be >= 1, found {substeps}")

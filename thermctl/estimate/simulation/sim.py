@@ -130,13 +130,21 @@ class Simulator:
         p_ref = problem.p(np.zeros(problem.n_eta))
         _, Bt = model.matrices(p_ref)
         _, Bt_2 = model.matrices(2.0 * p_ref)
-        if abs(Bt - Bt_2).max() > 0:
-            raise EstimationError("internal: boundary input matrix depends on the convection "
-                                  "parameters; the simulators assume it does not")
-        b = np.asarray(Bt @ U[:, sl["T"]].T).T
+        # an air path to a boundary node (a measured neighbour outside a local problem)
+        # puts its resistances into the input matrix: the forcing then depends on eta
+        self.b_varies = bool(abs(Bt - Bt_2).max() > 0)
+        self._UT = U[:, sl["T"]]
+        b = np.zeros((len(U), self.n))
         a_sup = U[:, sl["ms"]] * model.sym.kz
         b[:, :nz] += a_sup * U[:, sl["Ts"]] + U[:, sl["Q"]] * model.sym.inv_cz
-        self.b = b                                    # (N, n) constant term of each step [K/s]
+        if self.b_varies:
+            self._b0 = b
+            p_sym = ca.SX.sym("p", 2 * problem.m)
+            B_sym = model.sym.AB(p_sym)[1]
+            self._dB = ca.Function("dB", [p_sym], [ca.jacobian(ca.vec(B_sym), p_sym)])
+            self.b = None
+        else:
+            self.b = b + np.asarray(Bt @ self._UT.T).T   # (N, n) constant term of each step [K/s]
         flows, inverse, counts = np.unique(U[:, sl["ms"]], axis=0, return_inverse=True,
                                            return_counts=True)
         self.inverse = inverse.ravel()
@@ -152,6 +160,24 @@ class Simulator:
         self._factors = None
         self.obs_steps = problem.obs_index
         self.zone_index = problem.zone_index
+
+    def forcing(self, eta) -> np.ndarray:
+        """The constant term of each step, shape (N, n) [K/s]."""
+        if not self.b_varies:
+            return self.b
+        _, Bt = self.problem.model.matrices(self.problem.p(eta))
+        return self._b0 + np.asarray(Bt @ self._UT.T).T
+
+    def dforcing(self, eta) -> np.ndarray | None:
+        """``d forcing / d eta_i``, shape (n_eta, N, n) [K/s], or None when constant."""
+        if not self.b_varies:
+            return None
+        pb = self.problem
+        nT = self._UT.shape[1]
+        J = sp.csc_matrix(self._dB(pb.p(eta)).sparse())        # (n·nT, 2m)
+        D = np.asarray(J @ pb.dp_deta(eta))                      # (n·nT, n_eta)
+        return np.stack([self._UT @ D[:, i].reshape(self.n, nT, order="F").T
+                         for i in range(pb.n_eta)])
 
     def _dA_sparse(self, eta):
         """``dA/deta_i`` as sparse CSR matrices (list of n_eta)."""
@@ -356,12 +382,14 @@ class ExactSimulator(Simulator):
         for k in range(k0, k1):
             W, e, ph, Et, F = fac.get(self.inverse[k])
             Z = W.T @ (c[:, None] * X)
-            bt = W.T @ (c * self.b[k])
+            bt = W.T @ (c * fac.b[k])
             new = e[:, None] * Z
             new[:, 0] += ph * bt
             if ne:
                 G = F[0] * Z[:, 0][None, :] + F[1] * bt[None, :]
                 new[:, 1:1 + ne] += np.einsum("pij,ij->ip", Et, G)
+                if fac.db is not None:     # the forcing's own derivative, held like b
+                    new[:, 1:1 + ne] += ph[:, None] * (W.T @ (c[:, None] * fac.db[:, k].T))
             X = (W @ new) / c[:, None]
             if record is not None and k + 1 in record:
                 out[record[k + 1]] = X[self.zone_index]
@@ -377,7 +405,8 @@ class ExactSimulator(Simulator):
         etas = np.atleast_2d(np.asarray(etas, dtype=float))
         cs, S0s = zip(*(self._scaled(pb.p(eta)) for eta in etas))
         self.n_sim += len(etas)   # counted here: cost_batch may run on worker threads
-        return np.stack(cs), np.stack(S0s)
+        bs = np.stack([self.forcing(eta) for eta in etas], axis=1) if self.b_varies else None
+        return np.stack(cs), np.stack(S0s), bs
 
     def cost_batch(self, etas, prepared=None, objective: bool = False):
         """J at each row of ``etas`` (shape (G, n_eta)), vectorised over the points.
@@ -399,7 +428,8 @@ class ExactSimulator(Simulator):
             so what a grid must rank by to give them a start they cannot end above.
         """
         pb = self.problem
-        c, S0 = self.prepare(etas) if prepared is None else prepared   # (G, n), (G, n, n)
+        # (G, n), (G, n, n), (N, G, n) or None
+        c, S0, bs = self.prepare(etas) if prepared is None else prepared
         G, n, dt = c.shape[0], self.n, self.dt
         nf = pb.n_free
         X = np.broadcast_to(pb.x0_ref, (G, n)).copy()
@@ -429,7 +459,8 @@ class ExactSimulator(Simulator):
                 W, e, ph = item
                 Wt = W.transpose(0, 2, 1)
                 z = np.matmul(Wt, (c * X)[:, :, None])[:, :, 0]
-                bt = np.matmul(Wt, (c * self.b[k])[:, :, None])[:, :, 0]
+                bk = self.b[k] if bs is None else bs[k]
+                bt = np.matmul(Wt, (c * bk)[:, :, None])[:, :, 0]
                 X = np.matmul(W, (e * z + ph * bt)[:, :, None])[:, :, 0] / c
                 if nf:
                     Z = np.matmul(Wt, c[:, :, None] * Sx)
@@ -460,6 +491,7 @@ class ExactSimulator(Simulator):
         pb = self.problem
         x = pb.x0_ref if x0 is None else np.asarray(x0, dtype=float)
         c, S0 = self._scaled(pb.p(eta))
+        b = self.forcing(eta)
         X = np.empty((len(self.inverse) + 1, self.n))
         X[0] = x
         cache = {}
@@ -471,7 +503,7 @@ class ExactSimulator(Simulator):
                     cache[j] = (W, np.exp(lam * self.dt), self.dt * _phi1(lam * self.dt))
                 W, e, ph = cache[j]
                 z = W.T @ (c * X[k])
-                X[k + 1] = (W @ (e * z + ph * (W.T @ (c * self.b[k])))) / c
+                X[k + 1] = (W @ (e * z + ph * (W.T @ (c * b[k])))) / c
                 if self.counts[j] == 1:
                     del cache[j]
         return X
@@ -505,6 +537,8 @@ class Factors:
         pb = sim.problem
         self.c, self.S0 = sim._scaled(pb.p(eta))
         self.ne = pb.n_eta if derivs else 0
+        self.b = sim.forcing(eta)
+        self.db = sim.dforcing(eta) if self.ne else None
         if self.ne:
             c = self.c
             self.Es = sim._dA_deta(eta) * (c[None, :, None] / c[None, None, :])  # C^½ E C^-½
