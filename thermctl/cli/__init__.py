@@ -42,17 +42,25 @@ def _root(
                                            help="Data files: average rows that repeat a time "
                                                 "stamp with different values (a clock set "
                                                 "back) instead of stopping."),
+    snap: str = typer.Option("auto", "--snap", envvar="THERMCTL_SNAP",
+                             help="Data files: a time stamp this close to the grid is that "
+                                  "grid point's sample, taken as is (a BAS stamping rows a "
+                                  "few seconds late): auto (a tenth of the step), a duration "
+                                  "such as 20s, or none (1 s; stamps further off are "
+                                  "interpolated in time, which blends rows)."),
 ):
     """thermctl: building thermal network identification for MPC.
 
     Options before the command say how data files are read, for every command:
       thermctl --sep ';' --time-format excel identify data.csv -b building.yaml
+      thermctl --snap none identify data.csv -b building.yaml
     """
     from ._common import read_options
     read_options.sep = sep
     read_options.time_format = time_format
     read_options.allow_odd_units = allow_odd_units
     read_options.average_conflicts = average_conflicts
+    read_options.snap = None if snap.strip().lower() in ("none", "off", "no") else snap
 
 
 # Command modules register themselves on `app` when imported.

@@ -33,11 +33,12 @@ class ReadOptions:
     time_format: str | None = None
     allow_odd_units: bool = False
     average_conflicts: bool = False
+    snap: str | None = "auto"
 
     def kwargs(self) -> dict:
         return {"sep": self.sep, "time_format": self.time_format,
                 "allow_odd_units": self.allow_odd_units,
-                "average_conflicts": self.average_conflicts}
+                "average_conflicts": self.average_conflicts, "snap": self.snap}
 
 
 read_options = ReadOptions()

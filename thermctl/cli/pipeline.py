@@ -125,6 +125,9 @@ def identify(
     allow_parallel: bool = typer.Option(_D.structure.allow_parallel, help="--selection scores: "
                                         "allow air paths beside walls (open doors; --selection "
                                         "model always does)."),
+    scope: str = typer.Option(_D.structure.scope, help="--criterion simulation: SIN over the "
+                              "building (needs zones + 2 days), over each zone's neighbourhood, "
+                              "or auto (the building's when the days suffice)."),
     estimator: str = typer.Option(_D.estimation.estimator, help="--criterion simulation: nlp "
                                   "(multiple shooting, IPOPT), single_shooting, grid or none."),
     window_hours: float = typer.Option(_D.estimation.window_hours, help="--criterion simulation: "
@@ -186,7 +189,7 @@ def identify(
     console.print(meas.quality.summary(), highlight=False)
     opt = IdentifyOptions(
         structure=StructureOptions(method=method, level=level, rule=rule, s_min=s_min,
-                                   allow_parallel=allow_parallel),
+                                   allow_parallel=allow_parallel, scope=scope),
         selection=SelectionOptions(method=selection, candidates=candidates,
                                    criterion=selection_criterion, margin=margin,
                                    min_t=min_t, stability=stability,
