@@ -853,7 +853,8 @@ def _local_fit_options(opt) -> dict:
     for the local path, ``identify_many`` and the stability resamples."""
     return dict(criterion=opt.selection.criterion, margin=opt.selection.margin,
                 solar=opt.estimation.solar, internal_mass=opt.estimation.internal_mass,
-                fit_rows=opt.split.rows, min_t=opt.selection.min_t)
+                wall_factors=opt.estimation.wall_factors, fit_rows=opt.split.rows,
+                min_t=opt.selection.min_t)
 
 
 def _fitted_network(gb):
