@@ -37,6 +37,7 @@ def corridor(tmp_path_factory):
     tb = generate("corridor", zones=9, days=6, seed=2)
     tb.write(out)
     meas = read_measurements(out / "data.csv", out / "building.yaml")
+    meas.dir = out
     return meas, tb
 
 
@@ -137,3 +138,22 @@ def test_composite_parts_must_share_their_bounds(pugh):
     other = CostProblem(cp.parts[0].network, cp.parts[0].data, alpha=1.0)
     with pytest.raises(Exception, match="alpha|tau"):
         CompositeCostProblem([cp.parts[1], other])
+
+
+def test_cli_scope_and_snap(corridor, tmp_path):
+    from typer.testing import CliRunner
+
+    from thermctl.cli import app
+    meas, _ = corridor
+    d = meas.dir
+    args = ["identify", str(d / "data.csv"), "--building", str(d / "building.yaml"),
+            "--criterion", "simulation", "--scope", "neighbourhood", "--estimator", "grid",
+            "--scale", "global", "--out"]
+    res = CliRunner().invoke(app, ["--snap", "none"] + args + [str(tmp_path / "a")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "a" / "model.json").is_file()
+    bad = CliRunner().invoke(app, ["--snap", "banana"] + args + [str(tmp_path / "b")])
+    assert bad.exit_code != 0 and "snap" in bad.output
+    assert not (tmp_path / "b" / "model.json").exists()
+    bad = CliRunner().invoke(app, args[:-1] + ["--scope", "floor", "--out", str(tmp_path / "c")])
+    assert bad.exit_code != 0 and "scope" in bad.output

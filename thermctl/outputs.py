@@ -302,8 +302,9 @@ def write_outputs(ident: Identification, outdir) -> dict:
                         "labelled with their SIN scores (paper Fig. 3).")
             save_figure(plot_scores(sid), tmp, "scores", "Structure",
                         "Edge scores s_ij: fraction of the time-of-day graphs with the edge.")
-            save_figure(plot_correlations(sid), tmp, "correlations", "Structure",
-                        "Marginal vs partial correlation over the day (paper Fig. 7).")
+            if hasattr(sid, "graphs_"):    # the building's graphs (not the neighbourhoods')
+                save_figure(plot_correlations(sid), tmp, "correlations", "Structure",
+                            "Marginal vs partial correlation over the day (paper Fig. 7).")
         if ident.grid is not None:
             from .plots.estimate import plot_cost_vs_rbar
             save_figure(plot_cost_vs_rbar(ident.grid, fit=ident.estimate), tmp, "cost", "Parameters",

@@ -20,7 +20,7 @@ __all__ = ["plot_network", "plot_scores", "plot_correlations"]
 
 
 def _check_fitted(sid):
-    if not hasattr(sid, "graphs_"):
+    if not hasattr(sid, "edges_"):
         raise DataError("the StructureIdentifier is not fitted; call fit(data, network) first")
 
 

@@ -124,6 +124,12 @@ class NeighbourhoodStructureIdentifier:
         Candidate pair → mean score of the ends that scored it.
     score_matrix_ : ndarray, shape (n, n)
         ``scores_`` as a symmetric matrix over ``zones_`` (0 where unscored).
+    days_used_ : list of datetime.date
+        Days complete in every measured zone (a neighbourhood may use more: only its own
+        zones must be complete).
+    days_dropped_ : list of (datetime.date, str)
+    conduction_pairs_ : set of frozenset
+        Measured-zone pairs joined by a wall.
     skipped_ : dict of str to str
         Zones whose neighbourhood could not be scored, and why (e.g. fewer than 4
         complete days).
@@ -136,6 +142,8 @@ class NeighbourhoodStructureIdentifier:
     >>> sid = NeighbourhoodStructureIdentifier().fit(df, network)  # doctest: +SKIP
     >>> [(e.a, e.b, round(e.score, 2)) for e in sid.edges_]  # doctest: +SKIP
     """
+
+    method = "sin"
 
     def __init__(self, level: float = 0.05, adjust: str = "sidak", rule: str = "paper",
                  s_min: float = 0.25, allow_parallel: bool = False):
@@ -196,6 +204,9 @@ class NeighbourhoodStructureIdentifier:
             partners[a].append((d, b))
             partners[b].append((d, a))
         self.zones_, self.neighbourhoods_, self.skipped_ = zones, {}, {}
+        da = day_array(data, zones)
+        self.days_used_, self.days_dropped_ = da.days, da.dropped
+        self.conduction_pairs_ = {frozenset((a, b)) for a in zones for b in walls[a]}
         zone_scores = {}
         for z in zones:
             cand = [b for _, b in sorted(partners[z])]
@@ -232,3 +243,11 @@ class NeighbourhoodStructureIdentifier:
                                    self.rule, self.s_min)
         self.network_ = network.with_convection([(e.a, e.b, e.d) for e in self.edges_])
         return self
+
+    def pair_index(self, a: str, b: str) -> tuple[int, int]:
+        """Indices of two measured zones into ``score_matrix_``."""
+        try:
+            return self.zones_.index(a), self.zones_.index(b)
+        except ValueError:
+            raise DataError(f"({a!r}, {b!r}): both must be measured zones of the fit, "
+                            f"{self.zones_}") from None
