@@ -334,5 +334,7 @@ def _cand(spec, e):
         raise SpecError(f"candidate {a}-{b}: the spec gives no distance for this pair and no "
                         "wall joins it (add it under 'distances')")
     walls = spec.wall_pairs()
-    meas = set(spec.measured_zones)
-    return Candidate(a, b, d, frozenset((a, b)) in walls, a not in meas or b not in meas)
+    # a boundary node (outdoor air, or a measured neighbour outside a local problem) is
+    # measured: only a zone without a temperature column is an unmeasured end
+    unmeasured = set(spec.zone_names) - set(spec.measured_zones)
+    return Candidate(a, b, d, frozenset((a, b)) in walls, a in unmeasured or b in unmeasured)
