@@ -157,3 +157,13 @@ def test_cli_scope_and_snap(corridor, tmp_path):
     assert not (tmp_path / "b" / "model.json").exists()
     bad = CliRunner().invoke(app, args[:-1] + ["--scope", "floor", "--out", str(tmp_path / "c")])
     assert bad.exit_code != 0 and "scope" in bad.output
+
+
+def test_ipopt_progress_shows_its_limit_not_an_eta(capsys):
+    from thermctl.cli._common import progress
+    with progress("identify", terminal=False, min_interval=0.0, heartbeat=0.0) as p:
+        for k in range(1, 4):
+            p.callback()("ipopt", k, 500)
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1].startswith("identify: ipopt iteration 3 (limit 500), elapsed")
+    assert not any("ETA" in ln for ln in err)

@@ -77,6 +77,10 @@ def _clock(seconds: float) -> str:
     return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
 
 
+LIMIT_STAGES = frozenset({"ipopt"})
+"""Stages whose ``total`` is an iteration limit (no ETA: they usually stop far before it)."""
+
+
 class ProgressReporter:
     """Progress of long work: a rich bar on a terminal, plain lines otherwise, and log lines.
 
@@ -145,6 +149,11 @@ class ProgressReporter:
         now = time.perf_counter() if now is None else now
         t_start = self._stages.get(stage, [now])[0]
         elapsed = now - t_start
+        if stage in LIMIT_STAGES:
+            # an iteration limit, not a count of work: IPOPT stops at 13 of 500 on the
+            # 49-zone paper pipeline, so an ETA from the limit said "~13 min" for 20 s
+            return (f"{self.name}: {stage} iteration {done} (limit {total}), "
+                    f"elapsed {_clock(elapsed)}")
         count = f"{done}/{total}" if total else f"{done}"
         text = f"{self.name}: {stage} {count}, elapsed {_clock(elapsed)}"
         if total and done >= total:
