@@ -5,6 +5,7 @@ Run from the repository root::
     python -m mpc_examples.economic_mpc              # 3 days, identified model
     python -m mpc_examples.economic_mpc --hours 3 --start-day 10 --start-hour 5   # fast mode
     python -m mpc_examples.economic_mpc --model identified,true,conduction-only  # model error
+    python -m mpc_examples.economic_mpc --grid "6x1 5x6" --rti 2   # coarse tail, real-time iteration
 
 At every MPC step (default 15 min) the controller solves, over a horizon of N steps
 (default 6 h),
@@ -87,10 +88,17 @@ class EconomicWeights:
 
 
 class _Blocks:
-    """Named matrix blocks stacked column-major into one vector, with a receding shift."""
+    """Named matrix blocks stacked column-major into one vector, with a receding shift.
 
-    def __init__(self, blocks):
-        self.blocks = blocks  # [(name, rows, cols, shift)]
+    Each block's columns are either untouched by the shift (``kind`` None) or indexed by
+    ``"node"`` (state nodes), ``"interval"`` (shooting intervals) or ``"step"`` (control
+    steps); ``maps[kind][j]`` is the column of the previous solution that new column ``j``
+    takes (:func:`_shift_maps`: on a uniform grid ``j + 1``, last repeated).
+    """
+
+    def __init__(self, blocks, maps):
+        self.blocks = blocks  # [(name, rows, cols, kind)]
+        self.maps = maps
         self.offsets = {}
         o = 0
         for name, r, c, _ in blocks:
@@ -105,13 +113,40 @@ class _Blocks:
     def shift(self, v):
         v = np.asarray(v, dtype=float).ravel()
         out = np.empty_like(v)
-        for name, r, c, s in self.blocks:
+        for name, r, c, kind in self.blocks:
             M = self.get(v, name)
-            if s:
-                M = np.hstack([M[:, s:], np.repeat(M[:, -1:], s, axis=1)])
+            if kind is not None:
+                M = M[:, self.maps[kind]]
             o = self.offsets[name][0]
             out[o:o + r * c] = M.ravel(order="F")
         return out
+
+
+def _shift_maps(steps, s: int) -> dict:
+    """Where each column of the next problem is in the previous one, one control step later.
+
+    A column at time ``t`` (in control steps from now) takes the previous solution's last
+    column starting at or before ``t + 1``: on the uniform grid the classic shift (column
+    ``j + 1``, the last one repeated); on a coarse tail, e.g. ``[1]*6 + [6]*5``, the 1-h
+    step starting in 60 min keeps the previous 60-120 min step, which covers 70 min.
+
+    Parameters
+    ----------
+    steps : ndarray of int, shape (N,)
+        Step lengths in control steps.
+    s : int
+        Shooting nodes per step (Radau sub-steps of the implicit form, 1 for the explicit).
+    """
+    start = np.concatenate([[0], np.cumsum(steps)[:-1]]).astype(float)     # [control steps]
+    node_t = np.concatenate([(start[:, None] + np.arange(s)[None, :] * steps[:, None] / s).ravel(),
+                             [float(np.sum(steps))]])
+
+    def take(t):   # last column starting at or before t + 1 (1e-9: exact ties on the grid)
+        return np.searchsorted(t, t + 1.0 + 1e-9, side="right") - 1
+
+    node = np.minimum(take(node_t), len(node_t) - 1)
+    return {"node": node, "interval": np.minimum(node[:-1], len(node_t) - 2),
+            "step": np.minimum(take(start), len(start) - 1)}
 
 
 class EconomicMPC(RecedingHorizonMPC):
@@ -135,7 +170,22 @@ class EconomicMPC(RecedingHorizonMPC):
     transcription : {"implicit", "explicit"}
     weights : EconomicWeights
     max_iter : int
-        IPOPT iteration limit per solve.
+        IPOPT iteration limit per (fully converged) solve.
+    steps : sequence of int, optional
+        A non-uniform prediction grid, as :class:`~mpc_examples.linear_mpc.LinearMPC`'s:
+        the length of each of the ``horizon`` steps in multiples of ``dt`` (default all 1),
+        e.g. ``dt=600, horizon=11, steps=[1] * 6 + [6] * 5``: the first hour in 10-min
+        steps, then 1-h steps to 6 h. The forecast's step ``k`` must cover step ``k`` of
+        this grid (``Scenario.forecast(steps=...)``). Each step is one shooting interval of
+        ``substeps`` Radau sub-steps of its own length; energy and comfort are priced over
+        each step's length, the band is checked at the step ends only.
+    rti_iter : int, optional
+        Real-time iteration: after the first (cold, converged) solve, stop IPOPT after this
+        many iterations from the shifted previous primal-dual solution (``warm_start_init_point``,
+        barrier parameter 1e-3) instead of converging; what is left of the optimization is
+        carried to the next step in the warm start. None (default): converge every step.
+        The same solver objects serve both modes (an IPOPT ``iteration_callback`` counts),
+        so ``rti_iter`` may be changed between solves.
 
     Examples
     --------
@@ -146,12 +196,21 @@ class EconomicMPC(RecedingHorizonMPC):
 
     def __init__(self, model: ThermalModel, hvac: HVACModel, comfort_zones, dt: float = 900.0,
                  horizon: int = 24, substeps: int = 1, transcription: str = "implicit",
-                 weights: EconomicWeights = EconomicWeights(), max_iter: int = 300):
+                 weights: EconomicWeights = EconomicWeights(), max_iter: int = 300,
+                 steps=None, rti_iter: int | None = None):
         if transcription not in ("implicit", "explicit"):
             raise ValueError(f"transcription must be 'implicit' or 'explicit', found {transcription!r}")
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be a positive integer, found {substeps!r}")
         super().__init__(model, hvac, comfort_zones, dt, horizon, weights)
+        steps = np.ones(self.N, int) if steps is None else np.asarray(steps)
+        if steps.shape != (self.N,) or np.any(steps < 1) or np.any(steps != np.round(steps)):
+            raise ValueError(f"steps must be {self.N} positive integers, found {steps!r}")
+        if rti_iter is not None and (int(rti_iter) != rti_iter or rti_iter < 1):
+            raise ValueError(f"rti_iter must be a positive integer or None, found {rti_iter!r}")
+        self.steps = steps.astype(int)
+        self.h = self.dt * self.steps   # [s] length of each prediction step
+        self.rti_iter = None if rti_iter is None else int(rti_iter)
         self.s = int(substeps)
         self.transcription = transcription
         self.max_iter = int(max_iter)
@@ -187,13 +246,21 @@ class EconomicMPC(RecedingHorizonMPC):
         U = ca.vertcat(ms_all, Ts_all, TB, QG)
 
         if implicit:
-            res = self._implicit_residual()
-            rep = ca.DM(np.kron(np.eye(N), np.ones((1, s))))
-            gaps = res.map(N * s)(X[:, :-1], X[:, 1:], U @ rep)
+            # one residual per step length (uniform grid: one), mapped over its intervals
+            gaps = [None] * (N * s)
+            for m in np.unique(self.steps):
+                res = self._implicit_residual(m * self.dt / s)
+                ks = np.flatnonzero(self.steps == m)
+                idx = (ks[:, None] * s + np.arange(s)[None, :]).ravel().tolist()
+                g_m = res.map(len(idx))(X[:, idx], X[:, [i + 1 for i in idx]],
+                                        U[:, [i // s for i in idx]])
+                for j, i in enumerate(idx):
+                    gaps[i] = g_m[:, j]
+            gaps = ca.horzcat(*gaps)
             Xk = X[:, ::s]
         else:
             _, F = _dynamics(self.model, s)
-            gaps = X[:, 1:] - F.map(N)(X[:, :-1], U, self.dt)
+            gaps = X[:, 1:] - F.map(N)(X[:, :-1], U, ca.DM(self.h).T)
             Xk = X
         T_sup = Xk[self.sup.tolist(), :-1] if ns else ca.DM(0, N)
         rep_ns = lambda v: ca.repmat(v, ns, 1)  # noqa: E731
@@ -201,9 +268,9 @@ class EconomicMPC(RecedingHorizonMPC):
         reheat = hv.reheat(MS, TS, rep_ns(TC)) / 1e3
         coil = hv.coil_duty(MS, T_sup, rep_ns(TO), rep_ns(TC)) / 1e3
         T_c = Xk[self.comfort_idx.tolist(), 1:]
-        dth = self.dt / 3600.0
-        energy = dth * ca.sum2(fan + (reheat + CH) / hv.eta_heat + CC / hv.cop_cool)
-        comfort = dth * ca.sum2(ca.sum1(w.comfort_linear * (SL + SH)
+        dth = ca.DM(self.h / 3600.0).T     # [h] per step, 1 × N
+        energy = ca.sum2(dth * (fan + (reheat + CH) / hv.eta_heat + CC / hv.cop_cool))
+        comfort = ca.sum2(dth * ca.sum1(w.comfort_linear * (SL + SH)
                                         + w.comfort_quadratic * (SL ** 2 + SH ** 2)))
         dphi = ca.horzcat(PHI[:, 0] - UP[:ns], PHI[:, 1:] - PHI[:, :-1])
         dts = ca.horzcat(TS[:, 0] - UP[ns:], TS[:, 1:] - TS[:, :-1])
@@ -212,11 +279,13 @@ class EconomicMPC(RecedingHorizonMPC):
 
         g = [X[:, 0] - x0, ca.vec(gaps), ca.vec(CC - CH - coil),
              ca.vec(T_c + SL - ca.repmat(LO, nc, 1)), ca.vec(ca.repmat(HI, nc, 1) + SH - T_c)]
-        self._wb = _Blocks([("X", nx, nn, s if implicit else 1), ("phi", ns, N, 1),
-                            ("Ts", ns, N, 1), ("s_lo", nc, N, 1), ("s_hi", nc, N, 1),
-                            ("q_cool", 1, N, 1), ("q_preheat", 1, N, 1)])
-        self._gb = _Blocks([("x0", nx, 1, 0), ("gaps", nx, nn - 1, s if implicit else 1),
-                            ("coil", 1, N, 1), ("lo", nc, N, 1), ("hi", nc, N, 1)])
+        maps = _shift_maps(self.steps, s if implicit else 1)
+        self._wb = _Blocks([("X", nx, nn, "node"), ("phi", ns, N, "step"),
+                            ("Ts", ns, N, "step"), ("s_lo", nc, N, "step"), ("s_hi", nc, N, "step"),
+                            ("q_cool", 1, N, "step"), ("q_preheat", 1, N, "step")], maps)
+        self._gb = _Blocks([("x0", nx, 1, None), ("gaps", nx, nn - 1, "interval"),
+                            ("coil", 1, N, "step"), ("lo", nc, N, "step"), ("hi", nc, N, "step")],
+                           maps)
         wv = ca.vertcat(*[ca.vec(v) for v in (X, PHI, TS, SL, SH, CC, CH)])
         pv = ca.vertcat(x0, ca.vec(TB), ca.vec(QG), TO.T, TC.T, LO.T, HI.T, UP)
         gv = ca.vertcat(*g)
@@ -236,20 +305,24 @@ class EconomicMPC(RecedingHorizonMPC):
                              "ipopt.warm_start_bound_push": 1e-3,
                              "ipopt.warm_start_slack_bound_push": 1e-3,
                              "ipopt.warm_start_mult_bound_push": 1e-3})
+        # real-time iteration: the callback stops IPOPT after rti_iter iterations (it is
+        # called once at the start point, then after every iteration); one solver object
+        # for both modes, because each nlpsol costs the symbolic derivatives again
+        self._stop = _IterationLimit(wv.numel(), gv.numel(), pv.numel())
+        warm["iteration_callback"] = self._stop
         self._cold = ca.nlpsol("economic_mpc_cold", "ipopt", nlp, base)
         self._warm = ca.nlpsol("economic_mpc", "ipopt", nlp, warm)
         self.n_nonzeros = _kkt_nonzeros(self._warm)
         self._diag = ca.Function("diag", [wv, pv], [energy, comfort, move],
                                  ["w", "p"], ["energy", "comfort", "move"])
 
-    def _implicit_residual(self) -> ca.Function:
-        """``G(xa, xb, u)``: ``D xb − N xa − c`` of one Radau sub-step, from ``f`` only."""
+    def _implicit_residual(self, h: float) -> ca.Function:
+        """``G(xa, xb, u)``: ``D xb − N xa − c`` of one Radau sub-step of ``h`` [s], from ``f`` only."""
         f = casadi_rhs(self.model)   # sparse also for a ReducedNetwork
         nx, nu = self.model.network.n_states, self.model.network.n_inputs
         xa, xb, u = ca.SX.sym("xa", nx), ca.SX.sym("xb", nx), ca.SX.sym("u", nu)
         b = f(ca.DM.zeros(nx), u)
         Au = lambda v: f(v, u) - b  # noqa: E731  (f is affine in x: A_u v = f(v) − f(0))
-        h = self.dt / self.s
         # rows scaled by their largest coefficient at the minimum flows (fast states have
         # h²/6·|A|² entries of 1e3 and more): the same constraints, a better-conditioned KKT
         scale = radau_row_scale(at_flow(self.model, self.hvac.ms_min), h)
@@ -282,16 +355,22 @@ class EconomicMPC(RecedingHorizonMPC):
         wb, hv, N, s = self._wb, self.hvac, self.N, self.s
         net = self.model.network
         phi = self.frac_min[:, None] * np.asarray(fc.hvac_on[:N], float)[None, :]
+        m = self.steps
         Ts = np.full((len(self.sup), N), 20.0)
         ms_all = np.zeros((N, net.n_zones))
         ms_all[:, self.sup] = (phi * np.asarray(hv.ms_max, float)[self.sup, None]).T
         Ts_all = np.full((N, net.n_zones), 20.0)
         U = np.column_stack([ms_all, Ts_all, fc.T_boundary[:N], fc.gains[:N]])
         nodes = s if self.transcription == "implicit" else 1
-        # exact (dense expm) for small models, the sparse Radau step for big ones
+        # exact (dense expm) for small models, the sparse Radau step for big ones; simulated
+        # at dt / nodes (every grid node lies on it: node j of step k at (start_k + j m_k / s) dt)
         big = net.n_states > 400
-        X = self.model.simulate(np.repeat(U, nodes, axis=0), self.dt / nodes, x0,
-                                method="radau" if big else "exact", **({"substeps": 10} if big else {}))
+        Xf = self.model.simulate(np.repeat(U, m * nodes, axis=0), self.dt / nodes, x0,
+                                 method="radau" if big else "exact", **({"substeps": 10} if big else {}))
+        start = np.concatenate([[0], np.cumsum(m)[:-1]])
+        at = np.concatenate([((start[:, None] * nodes + np.arange(nodes)[None, :] * m[:, None])).ravel(),
+                             [int(np.sum(m)) * nodes]])
+        X = Xf[at]
         Xk = X[::nodes]
         Tc = Xk[1:, self.comfort_idx].T
         T_sup = Xk[:-1, self.sup].T
@@ -345,10 +424,12 @@ class EconomicMPC(RecedingHorizonMPC):
         t0, c0 = time.perf_counter(), time.process_time()
         if warm and prev is not None:
             solver = self._warm
+            self._stop.arm(self.rti_iter)
             r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg,
                        x0=np.clip(self._wb.shift(prev["x"]), lbx, ubx),
                        lam_x0=self._wb.shift(prev["lam_x"]), lam_g0=self._gb.shift(prev["lam_g"]))
-            ok = bool(solver.stats()["success"])
+            self._stop.arm(None)
+            ok = _accepted(solver.stats(), r)
             if not ok:  # a bad warm start (after a large disturbance) can stall IPOPT
                 log.info("economic MPC: warm solve failed (%s), retrying cold",
                          solver.stats()["return_status"])
@@ -356,7 +437,7 @@ class EconomicMPC(RecedingHorizonMPC):
             solver = self._cold
             r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, **cold)
         st = solver.stats()
-        ok = bool(st["success"])
+        ok = _accepted(st, r)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         wsol = np.asarray(r["x"]).ravel()
         self._prev = {"x": wsol, "lam_x": np.asarray(r["lam_x"]).ravel(),
@@ -375,6 +456,56 @@ class EconomicMPC(RecedingHorizonMPC):
         """Energy [kWh], comfort penalty and move penalty of a solution vector."""
         e, c, m = self._diag(sol_vector, P)
         return {"energy": float(e), "comfort": float(c), "move": float(m)}
+
+
+class _IterationLimit(ca.Callback):
+    """IPOPT ``iteration_callback`` that stops after ``limit`` iterations (None: never)."""
+
+    def __init__(self, nx: int, ng: int, np_: int):
+        ca.Callback.__init__(self)
+        self.nx, self.ng, self.np_ = int(nx), int(ng), int(np_)
+        self.limit, self.calls = None, 0
+        self.construct("rti_stop", {})
+
+    def arm(self, limit):
+        self.limit, self.calls = limit, 0
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        n = ca.nlpsol_out(i)
+        if n in ("f",):
+            return ca.Sparsity.scalar()
+        if n in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if n in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        if n == "lam_p":
+            return ca.Sparsity.dense(self.np_)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        self.calls += 1   # the first call is the start point, before any iteration
+        stop = self.limit is not None and self.calls > self.limit
+        return [1 if stop else 0]
+
+
+def _accepted(stats, r) -> bool:
+    """Converged, or stopped by the real-time-iteration limit at a finite point."""
+    if stats["success"]:
+        return True
+    return (stats["return_status"] == "User_Requested_Stop"
+            and bool(np.all(np.isfinite(np.asarray(r["x"])))))
 
 
 def _kkt_nonzeros(solver):
@@ -403,10 +534,48 @@ def _dynamics(model, substeps: int):
     return f, F
 
 
+def _extra_parser():
+    """The options only the economic example has (the shared runner does not know them)."""
+    import argparse
+    p = argparse.ArgumentParser(add_help=False, prog="python -m mpc_examples.economic_mpc")
+    p.add_argument("--grid", default=None,
+                   help="non-uniform prediction grid in multiples of --step, e.g. '6x1 5x6' (an "
+                        "hour of 10-min steps, then 1-h steps to 6 h: 11 instead of 36 steps); "
+                        "default: uniform")
+    p.add_argument("--rti", type=int, default=None,
+                   help="real-time iteration: IPOPT iterations per step after the first "
+                        "(converged) solve; default: converge every step")
+    return p
+
+
 def main(argv=None):
-    """Run the economic MPC against the baseline on the testbed; print and save the table."""
+    """Run the economic MPC against the baseline on the testbed; print and save the table.
+
+    ``--grid`` and ``--rti`` (:func:`_extra_parser`) are taken off the command line here;
+    everything else goes to :func:`mpc_examples.simulator.run_example`.
+    """
+    import functools
+    import sys
+
     from .simulator import run_example
-    return run_example("economic", EconomicMPC, argv)
+    extra = _extra_parser()
+    opts, rest = extra.parse_known_args(sys.argv[1:] if argv is None else argv)
+    if "-h" in rest or "--help" in rest:
+        extra.print_help()
+        print()
+    if opts.grid is None and opts.rti is None:
+        return run_example("economic", EconomicMPC, rest)
+    return run_example("economic", functools.partial(_make, grid=opts.grid, rti_iter=opts.rti),
+                       rest)
+
+
+def _make(model, hvac, comfort_zones, dt: float, horizon: int, grid=None, **options):
+    """:class:`EconomicMPC` with ``grid`` (``"6x1 5x6"``, multiples of ``dt``) over the
+    ``horizon · dt`` the runner asks for."""
+    from .scaling import parse_grid
+    steps = parse_grid(grid, dt / 60.0, horizon * dt / 3600.0)
+    return EconomicMPC(model, hvac, comfort_zones, dt=dt,
+                       horizon=horizon if steps is None else len(steps), steps=steps, **options)
 
 
 if __name__ == "__main__":
