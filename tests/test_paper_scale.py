@@ -129,6 +129,9 @@ def test_paper_pipeline_on_neighbourhoods_and_local_problems(corridor):
     assert ident.estimate.J <= ident.grid.best_J * (1 + 1e-6) + 1e-9 or \
         "start is returned" in ident.estimate.message
     assert ident.model.network.convection_edges
+    # picks scoring below the SIN level are what a pair without an air path scores: said
+    weak = [e for e in ident.structure.edges_ if e.score < opt.structure.level]
+    assert bool(weak) == any("score below the SIN level" in n for n in ident.notes)
 
 
 def test_composite_parts_must_share_their_bounds(pugh):

@@ -443,6 +443,18 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     if progress:
         progress("structure", 0, 1)
     sid = _paper_structure(cal, net0, opt.structure, notes)
+    level = opt.structure.level
+    weak = [e for e in sid.edges_ if e.score < level]
+    if weak:
+        # under SIN a pair without an air path is in a graph with probability <= level at
+        # each time of day, so its expected score is below the level: such picks are chance
+        notes.append(f"structure: {len(weak)} of the {len(sid.edges_)} selected air paths "
+                     f"score below the SIN level {level:g}, what a pair without an air "
+                     f"path scores by chance (e.g. "
+                     f"{', '.join(air_path_name(e.a, e.b) for e in weak[:3])}"
+                     f"{', ...' if len(weak) > 3 else ''}): the paper's rule gives every zone "
+                     "its best partner, but these data cannot tell them from no air path "
+                     "(more days raise SIN's power)")
     if progress:
         progress("structure", 1, 1)
     net = sid.network_
