@@ -26,6 +26,12 @@ zones' conditional log-likelihoods, so summed evidence is the composite-likeliho
 counterpart of the whole-building BIC (Varin, Reid & Firth, Statistica Sinica 2011). The
 combined R̄_v of an edge is the geometric mean of the ends that kept it.
 
+With ``wall_factors`` (one UA factor per wall class) every local wall keeps the class it
+has in the whole building (:attr:`LocalProblem.wall_classes`: a partition to a measured
+neighbour is a ``partition``, not a wall to a boundary node), the factor of a class is the
+median over the local fits (:func:`combine_ua_factors`), and
+:meth:`LocalIdentification.model` puts the building's walls at R/f.
+
 Local problems are pure functions of (local spec, data columns, options) and run as
 tasks: serially, on local processes, or on a ``dask.distributed`` cluster
 (:func:`run_local`). No dense matrix of the whole building is formed on this path: the
@@ -35,6 +41,7 @@ largest dense matrices are those of one local problem (its state count is
 
 from __future__ import annotations
 
+import inspect
 import logging
 import math
 import time
@@ -47,10 +54,11 @@ import numpy as np
 from ._parallel import run_tasks
 from .errors import BoundWarning, ConvergenceWarning, DataError, EstimationError
 from .network import ThermalNetwork, air_path_name
-from .spec import BuildingSpec, Distance, Zone
+from .spec import WALL_CLASSES, BuildingSpec, Distance, Zone, wall_class
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
-           "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES"]
+           "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES",
+           "combine_ua_factors"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +86,12 @@ class LocalProblem:
     proposed : tuple of (str, str, float) or None
         Candidates a structure rule proposed (:func:`propose_sin`): the search starts from
         them and prunes backward. ``None``: forward from none, then backward.
+    wall_classes : tuple of (str, str)
+        ``(edge name, class)`` of every wall of the local network, in network order: the
+        class the wall has in the *whole* building (:func:`thermctl.spec.wall_class`), not
+        in the local spec, where a measured neighbour is a boundary node and a partition
+        to it would be ``boundary`` (:func:`_whole_wall_classes`). Empty: the local
+        spec's own classes.
     """
 
     zone: str
@@ -86,6 +100,17 @@ class LocalProblem:
     columns: tuple
     aggregates: tuple = ()
     proposed: tuple | None = None
+    wall_classes: tuple = ()
+
+    def network(self, convection=()) -> ThermalNetwork:
+        """The local network with these air paths; it carries :attr:`wall_classes` as the
+        ``wall_classes`` override that :class:`thermctl.estimate.likelihood.LikelihoodProblem`
+        honours, so a UA factor per class (``wall_factors``) scales the same walls as in
+        the whole building."""
+        net = ThermalNetwork(self.spec, convection)
+        if self.wall_classes:
+            net.wall_classes = dict(self.wall_classes)
+        return net
 
     def data(self, frame):
         """The problem's data: its columns of ``frame``, plus the aggregate boundary
@@ -214,8 +239,35 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
             have = set(columns)
             cols = [c for c in cols if c in have] + sorted(c for c in have
                                                             if c.startswith("solar:"))
-        out.append(LocalProblem(z, sub, tuple(cands), tuple(cols), tuple(aggregates)))
+        out.append(LocalProblem(z, sub, tuple(cands), tuple(cols), tuple(aggregates),
+                                wall_classes=_whole_wall_classes(spec, sub, aggregates)))
     return out
+
+
+def _whole_wall_classes(spec, sub, aggregates) -> tuple:
+    """``((edge name, class), ...)``: each wall of the local spec ``sub`` with the class
+    (:func:`thermctl.spec.wall_class`) it has in the whole building ``spec``.
+
+    In ``sub`` a measured neighbour ``j`` is a boundary node, so ``wall_class`` calls the
+    partition ``i|j`` ``boundary``; here each node of ``sub`` stands for the node of the
+    whole building it replaces: a measured neighbour for itself, a proxy ``u~proxy`` for the
+    unmeasured zone ``u`` (a partition), an aggregate ``near~k`` for the measured zones it
+    merges (partitions: :func:`_aggregate_far_walls` merges only walls from a latent zone to
+    measured zones). Counted on Pugh Hall's r240 problem: 7 walls, the local spec's classes
+    4 boundary / 2 exterior / 1 partition, the whole building's 2 / 2 / 3 (r240|r241 and the
+    aggregate of the hallway's 5 walls to offices move to ``partition``); over all local
+    problems 14 of 24 local ``boundary`` walls are partitions (Pugh Hall), 20 of 36 (9-zone
+    corridor), 68 of 116 (25-zone corridor); no other class changes.
+    """
+    zones = set(spec.zone_names)
+    rep = {}
+    for node, members in aggregates:
+        # a proxy's members are the zones *around* u; the node itself stands for u
+        rep[node] = node[:-len("~proxy")] if node.endswith("~proxy") else members[0][0]
+    net = ThermalNetwork(sub)
+    # the network's conduction edges are the spec's walls, in order
+    return tuple((e.name, wall_class(rep.get(w.a, w.a), rep.get(w.b, w.b), zones))
+                 for w, e in zip(sub.walls, net.conduction_edges))
 
 
 def _proxy_members(spec, u, meas):
@@ -333,6 +385,10 @@ class LocalResult:
         Edge name → why in or out.
     error : str or None
         Why the problem failed (its edges are then undecided).
+    ua_factor : dict
+        Wall class → fitted UA factor of the local model [-], classes as in the whole
+        building (:attr:`LocalProblem.wall_classes`); empty without ``wall_factors`` and
+        for a problem with no candidate (no fit).
     """
 
     zone: str
@@ -347,6 +403,7 @@ class LocalResult:
     cpu: float = 0.0
     reasons: dict = field(default_factory=dict)
     error: str | None = None
+    ua_factor: dict = field(default_factory=dict)
 
 
 def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: float = 10.0,
@@ -357,7 +414,11 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     Without proposals (``problem.proposed is None``): forward selection from no air path,
     then backward elimination (BIC on the local Kalman likelihood, ``margin``). With
     proposals (:func:`propose_sin`): backward elimination from them. Then one R̄_v per
-    kept edge.
+    kept edge. With ``wall_factors=True`` the selected structure is fitted once more on
+    the whole building's wall classes (:func:`_whole_class_fit`), and its UA factors, R̄_v
+    and τ0 are the result's. Measured on Pugh Hall (partitions 2× UA, 6 days, seeds 1 and
+    2): the median partition factor was 2.22 and 1.87 this way, 2.23 and 1.91 with the
+    whole building's classes in every fit of the selection too (same combined air paths).
 
     Parameters
     ----------
@@ -420,12 +481,55 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     kept = [air_path_name(a, b) for a, b, _ in sel.edges]
     for k in kept:          # a kept edge always has a removal cost (keep step) or an add delta
         evidence.setdefault(k, -float(margin))
-    est = sel.estimator
-    rb = dict(sel.per_edge)
+    est, rb, n_fits, ua = sel.estimator, dict(sel.per_edge), sel.n_fits, {}
+    if options.get("wall_factors") or getattr(options.get("options"), "wall_factors", False):
+        est, refit = _whole_class_fit(problem, sub, sel, max_iter, solar=solar,
+                                      fit_rows=fit_rows, **options)
+        n_fits += refit
+        ua = est.problem_.ua_factors(est.eta_)
+        if kept:
+            rbs, _ = est.problem_.rbar_c(est.eta_)
+            rb = {e.name: float(r) for e, r in zip(est.problem_.edges, rbs)}
     tau0 = float(est.tau0_) if kept else float("nan")
     return LocalResult(problem.zone, kept, evidence, rb, tau0, n_states, int(est.n_obs_),
-                       sel.n_fits, time.perf_counter() - t0, time.process_time() - c0,
-                       dict(sel.reasons))
+                       n_fits, time.perf_counter() - t0, time.process_time() - c0,
+                       dict(sel.reasons), ua_factor=ua)
+
+
+def _whole_class_fit(problem, sub, sel, max_iter, **options):
+    """``(estimator, fits run)``: the selected structure of a local problem fitted with the
+    whole building's wall classes (:attr:`LocalProblem.wall_classes`).
+
+    :func:`thermctl.selection.select_air_paths` builds its networks from the local spec, on
+    which a partition to a measured neighbour is class ``boundary``; its UA factors then
+    mean something else in every local problem. This one fit, on :meth:`LocalProblem.network`,
+    gives factors that mean what the whole building's mean (the structure and the evidence
+    stay the selection's). Started from the selection's parameters, except the factors of
+    classes whose walls changed (those start at the spec, 1). No fit when the selection's
+    last fit already had these classes.
+    """
+    from .estimate.likelihood import LikelihoodEstimator
+    from .selection import select_air_paths
+
+    net = problem.network([tuple(e) for e in sel.edges])
+    have = list(sel.estimator.problem_.wall_classes)
+    want = list(dict(problem.wall_classes).get(e.name, c)
+                for e, c in zip(net.conduction_edges, have))
+    if not problem.wall_classes or have == want:
+        return sel.estimator, 0
+    same = {c for c in set(have) | set(want)
+            if [h == c for h in have] == [w == c for w in want]}
+    init = {k: v for k, v in sel.estimator.params_.items()
+            if not k.startswith("ua_factor[") or k[len("ua_factor["):-1] in same}
+    # the selection's own keywords (min_t...) are not the estimator's
+    skip = set(inspect.signature(select_air_paths).parameters)
+    kw = {k: v for k, v in options.items() if k not in skip}
+    est = LikelihoodEstimator(net, per_edge=True, tol=1e-9, max_iter=max_iter, **kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BoundWarning)
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        est.fit(sub, init=init)
+    return est, 1
 
 
 def local_cost_problem(spec: BuildingSpec, edges, frame, *, window: float = 12 * 3600.0,
@@ -746,6 +850,9 @@ class LocalIdentification:
         Wall time [s].
     cpu : float
         CPU time summed over the tasks [s].
+    ua_factor : dict
+        Wall class → combined UA factor of the local fits [-] (:func:`combine_ua_factors`);
+        empty without ``wall_factors``.
     """
 
     problems: list
@@ -757,15 +864,18 @@ class LocalIdentification:
     rule: str
     time: float
     cpu: float
+    ua_factor: dict = field(default_factory=dict)
 
     @property
     def reasons(self) -> dict:
         return {v.name: v.reason for v in self.verdicts}
 
     def model(self, spec: BuildingSpec, meta: dict | None = None):
-        """The whole-building model with the combined per-edge R̄_v and C_v = τ0/R̄_v."""
+        """The whole-building model with the combined per-edge R̄_v and C_v = τ0/R̄_v, and
+        with ``wall_factors`` every wall of a class with a combined factor f at ``R/f``
+        (:meth:`fitted_spec`)."""
         from .model import C_V_PAPER, RBAR_V_PAPER, ThermalModel
-        net = ThermalNetwork(spec, self.edges)
+        net = ThermalNetwork(self.fitted_spec(spec), self.edges)
         if not self.edges:
             return ThermalModel(net, RBAR_V_PAPER, C_V_PAPER, meta=meta)
         rb = np.array([self.rbar_v.get(e.name, np.nan) for e in net.convection_edges])
@@ -774,12 +884,31 @@ class LocalIdentification:
         tau = self.tau0 if math.isfinite(self.tau0) else RBAR_V_PAPER * C_V_PAPER
         return ThermalModel(net, rb, tau / rb, meta=meta)
 
+    def fitted_spec(self, spec: BuildingSpec) -> BuildingSpec:
+        """``spec`` with the combined UA factors: every wall of a class (its class in
+        ``spec``, :func:`thermctl.spec.wall_class`) with factor f gets all three resistances
+        ``R/f``, capacities kept — what the whole-building fit's
+        :meth:`~thermctl.estimate.likelihood.LikelihoodProblem.fitted_network` does. Without
+        factors, ``spec`` itself."""
+        from dataclasses import replace
+        if not self.ua_factor:
+            return spec
+        zones = set(spec.zone_names)
+        walls = []
+        for w in spec.walls:
+            f = self.ua_factor.get(wall_class(w.a, w.b, zones), 1.0)
+            walls.append(w if f == 1.0 else replace(w, R=tuple(float(r) / f for r in w.R)))
+        return replace(spec, walls=tuple(walls))
+
     def summary(self) -> str:
         st = sorted(p.n_states for p in self.problems)
         lines = [f"local identification: {len(self.problems)} problems (median "
                  f"{st[len(st) // 2] if st else 0} states, max {st[-1] if st else 0}), "
                  f"{len(self.edges)} air path(s) by rule {self.rule!r}, {self.time:.0f} s wall, "
                  f"{self.cpu:.0f} s CPU"]
+        if self.ua_factor:
+            lines.append("  UA factors (median of the local fits): " + ", ".join(
+                f"{c} {f:.3g}" for c, f in self.ua_factor.items()))
         lines += [f"  {v.name}: {v.reason}" for v in self.verdicts if v.kept]
         failed = [r for r in self.results if r.error]
         lines += [f"  local problem of {r.zone} failed: {r.error}" for r in failed]
@@ -859,4 +988,28 @@ def assemble(problems, results, rule: str = "both", margin: float = 10.0,
     taus = [r.tau0 for r in results if math.isfinite(r.tau0)]
     tau0 = float(np.median(taus)) if taus else float("nan")
     return LocalIdentification(problems, results, verdicts, edges, rb, tau0, rule, wall,
-                               float(sum(r.cpu for r in results)))
+                               float(sum(r.cpu for r in results)),
+                               combine_ua_factors(results))
+
+
+def combine_ua_factors(results) -> dict:
+    """Wall class → median of the local fits' UA factors of that class [-].
+
+    Every local problem that has walls of a class fits its own factor for them (classes of
+    the whole building, :attr:`LocalProblem.wall_classes`) from its own few walls, and some
+    of those factors the data do not pin down: measured on Pugh Hall (exact inputs, seeds
+    1–2, 3 and 6 days, 8 runs of 6 problems), ``ua_factor[boundary]`` (truth 1) sat on its
+    bound 5 in 13 of 48 local fits; its median over a run was 0.90–2.24, its mean 1.47–2.68.
+    For partitions 2× the spec's UA the single local factors scattered over 0.60–5.0
+    (3 days) and 1.07–2.79 (6 days), their median 1.87–2.28, their mean 1.78–2.45 and
+    geometric mean 1.70–2.23; with the plant as the spec the median was 0.90–1.09. The
+    median follows the bulk of the problems, not the ones on a bound. Failed problems and
+    fits without factors count for nothing; empty when no local fit had factors.
+    """
+    by = {}
+    for r in results:
+        if r.error is None:
+            for c, f in (r.ua_factor or {}).items():
+                if math.isfinite(f):
+                    by.setdefault(c, []).append(float(f))
+    return {c: float(np.median(by[c])) for c in WALL_CLASSES if c in by}
