@@ -24,9 +24,13 @@ rows), each with the QP solvers asked for; for the economic NMPC the implicit Ra
 ``--max-dense-nnz`` nonzeros is listed with that count and not built (the 200-zone ZOH
 QP: 36 · 2 348² ≈ 2·10⁸ nonzeros, 1.6 GB of values alone).
 
-``--grid`` gives the linear MPC a non-uniform prediction grid (:class:`LinearMPC` ``steps``):
-fine steps first, where the applied input is decided, long ones after; the forms are then
-labelled e.g. ``euler 6x10+10x30min``.
+``--grid`` gives both MPCs a non-uniform prediction grid (:class:`LinearMPC` and
+:class:`EconomicMPC` ``steps``): fine steps first, where the applied input is decided, long
+ones after; the forms are then labelled e.g. ``euler 6x10+10x30min``. ``--rti`` runs the
+economic NMPC once per value: 0 converges IPOPT every step, ``k`` stops it after ``k``
+iterations from the shifted previous solution (real-time iteration; solver ``ipopt rti k``).
+The first solve of a run is always cold and converged; ``first [s]`` is its wall time and
+``max after first [s]`` the largest wall time of the steps after it.
 
 Wall times include whatever else runs on the machine; CPU time is the process's own
 (single-threaded: set ``OMP_NUM_THREADS=1``).
@@ -37,6 +41,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import time
 from pathlib import Path
 
@@ -114,7 +119,8 @@ def _row(kind, form, solver, zones, name, model, **kw):
     r = {"MPC": kind, "zones": zones, "model": name, "states": model.network.n_states,
          "form": form, "solver": solver, "variables": np.nan, "nonzeros": np.nan,
          "build [s]": np.nan, "solve median [s]": np.nan, "solve max [s]": np.nan,
-         "CPU median [s]": np.nan, "solves": 0, "failures": 0, "note": ""}
+         "CPU median [s]": np.nan, "first [s]": np.nan, "max after first [s]": np.nan,
+         "solves": 0, "failures": 0, "note": ""}
     r.update(kw)
     return r
 
@@ -156,8 +162,8 @@ def _grid_label(steps, step):
     return "+".join(out) + "min"
 
 
-def _measure(kind, form, solver, scn, name, model, to_x, args):
-    steps = parse_grid(args.grid, args.step, args.horizon) if kind == "linear" else None
+def _measure(kind, form, solver, scn, name, model, to_x, args, rti=None):
+    steps = parse_grid(args.grid, args.step, args.horizon)
     N = int(round(args.horizon * 60.0 / args.step)) if steps is None else len(steps)
     zones = len(scn.tb.network.zones)
     nx = model.network.n_states
@@ -173,7 +179,7 @@ def _measure(kind, form, solver, scn, name, model, to_x, args):
                         solver=solver, transcription=form.split()[0], steps=steps)
     else:
         mpc = EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
-                          transcription=form)
+                          transcription=form.split()[0], steps=steps, rti_iter=rti or None)
     build = time.perf_counter() - t0
     n_solves = args.solves if nx <= 1000 else args.solves_large
     wall, cpu, fails = state_feedback_run(scn, mpc, to_x, n_solves)
@@ -187,6 +193,9 @@ def _measure(kind, form, solver, scn, name, model, to_x, args):
                                        "solve median [s]": float(np.median(wall)),
                                        "solve max [s]": float(wall.max()),
                                        "CPU median [s]": float(np.median(cpu)),
+                                       "first [s]": float(wall[0]),
+                                       "max after first [s]": (float(wall[1:].max())
+                                                               if len(wall) > 1 else np.nan),
                                        "solves": len(wall), "failures": fails})
 
 
@@ -213,9 +222,12 @@ def main(argv=None):
     p.add_argument("--step", type=float, default=10.0, help="MPC step [min]")
     p.add_argument("--horizon", type=float, default=6.0, help="prediction horizon [h]")
     p.add_argument("--grid", default=None,
-                   help="linear MPC: non-uniform prediction grid in multiples of --step, e.g. "
+                   help="both MPCs: non-uniform prediction grid in multiples of --step, e.g. "
                         "'6x1 10x3' (an hour of 10-min steps, then 30-min steps to 6 h: 16 "
                         "instead of 36 steps); the control step stays --step")
+    p.add_argument("--rti", type=int, nargs="+", default=[0],
+                   help="economic NMPC: IPOPT iterations per step after the first solve, one "
+                        "run per value (0: converge every step)")
     p.add_argument("--per-zone", type=int, nargs="*", default=[3],
                    help="states per zone of the structured reductions")
     p.add_argument("--max-dense-nnz", type=float, default=2e7,
@@ -243,10 +255,12 @@ def main(argv=None):
                             continue
                         jobs.append(("linear", form, solver))
             if "economic" in args.mpc and z <= args.economic_max_zones:
-                jobs.append(("economic", "implicit", "ipopt"))
+                jobs += [("economic", "implicit", f"ipopt rti {k}" if k else "ipopt")
+                         for k in args.rti]
             for kind, form, solver in jobs:
                 try:
-                    rows.append(_measure(kind, form, solver, scn, name, model, to_x, args))
+                    rti = int(solver.split()[-1]) if solver.startswith("ipopt rti") else None
+                    rows.append(_measure(kind, form, solver, scn, name, model, to_x, args, rti))
                 except MemoryError as exc:   # report, do not hide
                     rows.append(_row(kind, form, solver, z, name, model, note=f"failed: {exc!r}"))
                 r = rows[-1]
@@ -254,6 +268,7 @@ def main(argv=None):
                       f"states, {r['variables']:.0f} variables, {r['nonzeros']:.0f} nonzeros): "
                       f"build {r['build [s]']:.2f} s, median {r['solve median [s]']:.3f} s, "
                       f"max {r['solve max [s]']:.3f} s, CPU median {r['CPU median [s]']:.3f} s, "
+                      f"first {r['first [s]']:.3f} s, max after first {r['max after first [s]']:.3f} s, "
                       f"failures {r['failures']} {r['note']}", flush=True)
                 # the table so far, in case a long run is stopped
                 pd.DataFrame(rows).set_index("MPC").to_csv(args.out / "scaling.partial.csv")
@@ -267,6 +282,9 @@ def main(argv=None):
         err_lines.append(f"  {z} zones, {name}: {info['states'][0]} -> {info['states'][1]} "
                          f"states in {info['time [s]']:.1f} s; {se}")
     text = text + "\n" + "\n".join(err_lines)
+    load = os.getloadavg()
+    text += (f"\nload average (1/5/15 min) at the end: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} "
+             f"({os.cpu_count()} cores)")
     print(text)
     args.out.mkdir(parents=True, exist_ok=True)
     df.to_csv(args.out / "scaling.csv")
