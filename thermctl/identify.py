@@ -582,6 +582,8 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
                                        workers=opt.split.workers, progress=progress, **sel_kw)
             sel = _drop_unstable(spec, cal, opt, sel, stab, notes)
         net = ThermalNetwork(spec, sel.edges)
+        _lost_data_note(sel.reasons.items(), {air_path_name(a, b) for a, b, _ in sel.edges},
+                        notes)
         if not sel.edges:
             notes.append("the data support no convection edge: the model is conduction-only")
         else:
@@ -622,6 +624,31 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     return _finish_local(meas, cal, val, opt, li, progress, client)
 
 
+def _lost_data_note(reasons, kept: set, notes: list) -> None:
+    """One note naming the air paths whose verdict rests on the samples that survived a
+    data loss (:meth:`thermctl.estimate.likelihood.LikelihoodScorer.lost_data`).
+
+    Parameters
+    ----------
+    reasons : iterable of (str, str)
+        Air-path name and a selection reason (several per path for local problems).
+    kept : set of str
+        Air paths in the model.
+    """
+    marker = "uncertain (data lost)"
+    hit = {}
+    for name, why in reasons:
+        if marker in why:
+            hit.setdefault(name, why)
+    if not hit:
+        return
+    said = "; ".join(f"{nm} ({'kept' if nm in kept else 'left out'}: "
+                     f"{hit[nm][hit[nm].index(marker) + len(marker) + 2:]})"
+                     for nm in sorted(hit))
+    notes.append(f"{len(hit)} air path verdict(s) rest on the samples that survived the "
+                 f"gaps in the data: {said}. More (or gap-free) days would settle them.")
+
+
 def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identification:
     """The model of combined local results: whole-building refit when small enough."""
     spec = meas.spec
@@ -629,6 +656,9 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
     logger.info("%s", li.summary())
     stab = _local_stability(li, cal, opt, progress, client, notes) \
         if opt.selection.stability else None
+    _lost_data_note(((k, f"{r.zone}: {v}") for r in li.results
+                     for k, v in (r.reasons or {}).items()),
+                    {air_path_name(a, b) for a, b, _ in li.edges}, notes)
     failed = [r for r in li.results if r.error]
     if failed:
         notes.append(f"{len(failed)} local problem(s) failed, their air paths are undecided: "
@@ -653,14 +683,19 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
         if progress:
             progress("whole-building refit", 1, 1)
     else:
+        ua = li.ua_factor
         notes.append(f"the whole-building model has {net.n_states} states (> "
                      f"{opt.split.refit_max_states}): R̄_v per air path from the local problems, "
-                     "no whole-building refit and no intervals")
+                     "no whole-building refit and no intervals"
+                     + ("; UA factor per wall class, median of the local fits: "
+                        + ", ".join(f"{c} {f:.3g}" for c, f in ua.items()) if ua else ""))
     meta = _meta(meas, cal, val, opt, {})
     meta["local"] = {
         "rule": li.rule, "time_s": li.time, "cpu_s": li.cpu, "tau0": li.tau0,
+        "ua_factor": dict(li.ua_factor),
         "problems": [{"zone": r.zone, "n_states": r.n_states, "edges": r.edges,
-                      "time_s": r.time, "n_fits": r.n_fits, "error": r.error}
+                      "time_s": r.time, "n_fits": r.n_fits, "error": r.error,
+                      "ua_factor": dict(r.ua_factor)}
                      for r in li.results],
         "verdicts": {v.name: {"kept": v.kept, "evidence": v.evidence, "rbar_v": v.rbar_v,
                               "reason": v.reason} for v in li.verdicts},

@@ -221,6 +221,14 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     def holds(small, big):
         return (True, float("nan"), "") if consistent is None else consistent(small, big)
 
+    lost_data = getattr(scorer, "lost_data", None)
+    lost = {}               # edge name -> why its verdict rests on the samples that survived
+
+    def check_lost(name, small, big, cost):
+        note = "" if lost_data is None else lost_data(small, big, cost, margin)
+        if note:
+            lost[name] = note
+
     if direction in ("forward", "both"):
         while max_edges is None or len(cur) < max_edges:
             rest = [c for c in cands if c not in cur]
@@ -243,6 +251,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                                                                         else "")
                 say(f"added {pick} ({crit} {d:+.1f}{', ' + why if why else ''})")
             else:
+                if ok:
+                    check_lost(pick, fitted, f_full, -d)
                 note = (f"best candidate improves the criterion by less than the margin "
                         f"{margin:g}" if ok else f"best candidate's gain is not consistent: {why}")
                 path.append(SelectionStep("stop", pick, val, d, [x.name for x in cur], screened,
@@ -268,6 +278,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                     else min(trials, key=lambda k: trials[k][0]))
             d, f2, v2 = trials[pick]
             if d < margin or pick in weak:
+                if pick not in weak:
+                    check_lost(pick, f2, fitted, d)
                 cur = [x for x in cur if x.name != pick]
                 fitted, val = f2, v2
                 why = (f"its gain is not consistent: {weak[pick][1]}" if pick in weak
@@ -287,6 +299,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                                           note=f"removing any edge costs more than the "
                                                f"margin {margin:g}"))
                 for k, t in trials.items():
+                    check_lost(k, t[1], fitted, t[0])
                     if k not in reasons or reasons[k].startswith("added"):
                         reasons[k] = (reasons.get(k, "in") + f"; removing it costs {crit} "
                                       f"{t[0]:+.1f}" + (f", {said[k]}" if said.get(k) else ""))
@@ -300,6 +313,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                                    f"{best_screen[c.name]:+.1f}")
             else:
                 reasons[c.name] = "out"
+        if c.name in lost:
+            reasons[c.name] += "; " + lost[c.name]
         if c.parallel:
             reasons[c.name] += " [parallel to a wall]"
         if c.unmeasured:

@@ -156,11 +156,7 @@ class LikelihoodScorer:
         """
         if self.test is not None:
             return True, float("nan"), ""
-        with single_thread_blas():
-            ids_s, ls = small.problem_.block_nll(small.eta_, self.block)
-            ids_b, lb = big.problem_.block_nll(big.eta_, self.block)
-        days, i_s, i_b = np.intersect1d(ids_s, ids_b, return_indices=True)
-        g = ls[i_s] - lb[i_b]
+        g = self._daily_gains(small, big)
         D = len(g)
         if D < 4:
             return True, float("nan"), f"{D} day(s): too few to test consistency"
@@ -170,6 +166,58 @@ class LikelihoodScorer:
         need = f" (needs {self.min_t:g})" if self.min_t > 0 else ""
         return (self.min_t <= 0 or t >= self.min_t, t,
                 f"daily gain t {t:.1f}{need}, better on {wins} of {D} days")
+
+    @property
+    def lost_days(self) -> float:
+        """Fit samples lost (a zone temperature or an input missing: gaps the reader did
+        not fill, an outage), in days [d]."""
+        if getattr(self, "_lost", None) is None:
+            d = self.train
+            bad = ~(np.isfinite(d.Y).all(axis=1) & np.isfinite(d.U).all(axis=1))
+            self._lost = float(bad.sum()) * d.dt / 86400.0
+        return self._lost
+
+    def lost_data(self, small, big, cost: float, margin: float) -> str:
+        """Whether the samples lost could have turned the verdict on ``big``'s extra path.
+
+        The criterion change of the path is a sum of daily gains ``g_d``
+        (:meth:`consistent`); the ``L`` days lost would have added about ``L`` more. Had
+        they gone like the path's worst tenth of days (``q10``, or its best tenth for a path
+        left out), its cost ``cost`` [criterion units: removing it from ``big`` when
+        ``cost > margin`` (kept), adding it otherwise] would be ``cost + 2 L q``. When that
+        crosses ``margin`` the verdict rests on the data that happened to survive.
+
+        Returns
+        -------
+        str
+            "" when the verdict holds (or nothing was lost, or too few days to say), else a
+            few words for the selection's reasons, starting with "uncertain (data lost)".
+        """
+        L = self.lost_days
+        if L <= 0 or self.test is not None:
+            return ""
+        g = self._daily_gains(small, big)
+        if len(g) < 4:
+            return ""
+        kept = cost >= margin
+        q = float(np.quantile(g, 0.1 if kept else 0.9))
+        shifted = cost + 2.0 * L * (min(q, 0.0) if kept else max(q, 0.0))
+        if (shifted >= margin) == kept:
+            return ""
+        how = "worst" if kept else "best"
+        return (f"uncertain (data lost): {L:.2g} day(s) of samples lost; had they gone like "
+                f"its {how} tenth of days ({q:+.1f} per day in log-likelihood), "
+                f"{'removing' if kept else 'adding'} it would {'cost' if kept else 'gain'} "
+                f"{self.name} {shifted:+.1f}, {'under' if kept else 'over'} the margin "
+                f"{margin:g}")
+
+    def _daily_gains(self, small, big) -> np.ndarray:
+        """``nll_d(small) − nll_d(big)`` per block (day) present in both."""
+        with single_thread_blas():
+            ids_s, ls = small.problem_.block_nll(small.eta_, self.block)
+            ids_b, lb = big.problem_.block_nll(big.eta_, self.block)
+        _, i_s, i_b = np.intersect1d(ids_s, ids_b, return_indices=True)
+        return ls[i_s] - lb[i_b]
 
     def describe(self, c, fitted) -> str:
         """One line on air path ``c`` in ``fitted``."""
