@@ -145,7 +145,7 @@ def _wall(d, i):
 
 
 ALLOWED = {
-    "top": r"\['boundary', 'capacity_multiplier', 'distances', 'name', 'w_s', 'walls', 'zones'\]",
+    "top": r"\['boundary', 'capacity_multiplier', 'distances', 'flows', 'name', 'w_s', 'walls', 'zones'\]",
     "zone": r"\['capacitance', 'measured', 'volume'\]",
     "wall": r"\['C', 'R', 'area', 'between', 'heat_capacity', 'name', 'u_value'\]",
     "distance": r"\['between', 'd'\]",
@@ -296,7 +296,7 @@ def test_unknown_key_error_lists_every_allowed_key(small_spec_dict, level, mutat
         spec_from_dict(mutate(small_spec_dict))
     listed = re.search(r"allowed keys are \[(.*)\]", str(info.value)).group(1)
     expected = {"top": {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls",
-                        "distances"},
+                        "distances", "flows"},
                 "zone": {"volume", "measured", "capacitance"},
                 "wall": {"between", "R", "C", "area", "u_value", "heat_capacity", "name"},
                 "distance": {"between", "d"}}[level]

@@ -407,15 +407,20 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     opt = options or IdentifyOptions()
     opt.check()
     cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
+    flows = meas.spec.flows
+    local = False
     if opt.paper or opt.selection_method == "scores":
         ident = _identify_paper(meas, cal, val, opt, progress)
     elif opt.is_local(meas.spec):
-        return _identify_local(meas, cal, val, opt, progress, client)
+        ident, local = _identify_local(meas, cal, val, opt, progress, client), True
     else:
         ident = _identify_greybox(meas, cal, val, opt, progress)
+    if flows:
+        ident.notes.append("directed flows (inputs, from the spec): " + ", ".join(
+            f"{f.src} → {f.dst} ({f.fraction:g} × {f.rate_column})" for f in flows))
     # --workers also runs the stability resamples of a whole building in parallel
-    if client is not None or opt.split.scheduler or (opt.split.workers
-                                                     and not opt.selection.stability):
+    if not local and (client is not None or opt.split.scheduler
+                      or (opt.split.workers and not opt.selection.stability)):
         ident.notes.append(f"--workers/--scheduler apply to local problems only; this building "
                            f"({len(meas.spec.measured_zones)} measured zones, --scale "
                            f"{opt.split.scale}) was identified as a whole in this process")

@@ -230,11 +230,16 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         zones_l = [Zone(zz.name, zz.volume, zz.measured, spec.zone_capacitance(zz.name))
                    for zz in zones_l]
         dists = tuple(Distance(a, b, d) for a, b, d in cands)
+        # directed flows into the problem's zones: inputs (their source temperature and
+        # rate are data columns, wherever the source is)
+        flows = tuple(f for f in spec.flows if f.dst in local)
         sub = BuildingSpec(f"{spec.name}:{z}", tuple(zones_l), tuple(bnd), tuple(walls), dists,
-                           1.0, spec.w_s, f"{spec.source} (local problem of {z})")
+                           1.0, spec.w_s, f"{spec.source} (local problem of {z})", flows)
         cols = [f"T:{n}" for n in [z] + bnd if n not in agg_nodes]
         for zz in zones_l:          # spec order, not set order: the same columns every run
             cols += [f"ms:{zz.name}", f"Ts:{zz.name}", f"Q:{zz.name}"]
+        for f in flows:
+            cols += [c for c in (f"T:{f.src}", f.rate_column) if c not in cols]
         if columns is not None:
             have = set(columns)
             cols = [c for c in cols if c in have] + sorted(c for c in have

@@ -30,7 +30,7 @@ from . import rc
 from .errors import SpecError, SpecWarning
 
 __all__ = [
-    "Zone", "Wall", "Distance", "BuildingSpec", "load_spec", "spec_from_dict",
+    "Zone", "Wall", "Distance", "Flow", "BuildingSpec", "load_spec", "spec_from_dict",
     "RHO_AIR", "cp_moist_air", "OUTDOOR_NAMES", "is_outdoor",
 ]
 
@@ -75,10 +75,12 @@ def wall_class(a: str, b: str, zones) -> str:
     return "boundary"
 
 
-_TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances"}
+_TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances",
+             "flows"}
 _ZONE_KEYS = {"volume", "measured", "capacitance"}
 _WALL_KEYS = {"between", "R", "C", "area", "u_value", "heat_capacity", "name"}
 _DIST_KEYS = {"between", "d"}
+_FLOW_KEYS = {"from", "to", "fraction", "of", "column"}
 
 
 @dataclass(frozen=True)
@@ -142,6 +144,40 @@ class Distance:
 
 
 @dataclass(frozen=True)
+class Flow:
+    """A directed air flow of known rate from one node into a zone.
+
+    Ventilation air passed on from room to room (supplied to a living room, through the
+    corridor, extracted in the bath): the receiving zone gains ``ṁ·cp·(T_src − T_dst)``,
+    one way, beside any symmetric air-path edge. Air leaves every zone at that zone's
+    temperature, as much as enters it (the spec does not check the mass balance).
+
+    Attributes
+    ----------
+    src, dst : str
+        The node the air comes from (a zone with a measured temperature, or a boundary
+        node) and the zone it enters.
+    fraction : float
+        Multiplies the rate [-].
+    of : str or None
+        The rate is ``fraction`` × this zone's supply flow (its ``ms:`` column) [kg/s].
+    column : str or None
+        Or ``fraction`` × this data column [kg/s].
+    """
+
+    src: str
+    dst: str
+    fraction: float = 1.0
+    of: str | None = None
+    column: str | None = None
+
+    @property
+    def rate_column(self) -> str:
+        """The data column whose value times ``fraction`` is the rate [kg/s]."""
+        return f"ms:{self.of}" if self.of is not None else str(self.column)
+
+
+@dataclass(frozen=True)
 class BuildingSpec:
     """A validated building spec. Build with :func:`load_spec` or :func:`spec_from_dict`."""
 
@@ -153,6 +189,7 @@ class BuildingSpec:
     capacity_multiplier: float = 1.0
     w_s: float = W_S_DEFAULT
     source: str = field(default="<dict>", compare=False)
+    flows: tuple = ()
 
     @property
     def zone_names(self) -> list[str]:
@@ -258,7 +295,9 @@ class BuildingSpec:
             "boundary": list(self.boundary),
             "walls": walls,
             "distances": [{"between": [d.a, d.b], "d": d.d} for d in self.distances],
-        }
+        } | ({"flows": [{"from": f.src, "to": f.dst, "fraction": f.fraction}
+                        | ({"of": f.of} if f.of is not None else {"column": f.column})
+                        for f in self.flows]} if self.flows else {})
 
     def dump(self, path) -> None:
         """Write the spec as YAML (``.yaml``/``.yml``) or JSON (any other suffix)."""
@@ -489,10 +528,43 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
         seen_pairs.add(key)
         distances.append(Distance(a, b, d))
 
+    flows = _flows(data.get("flows") or [], src, zone_set, nodes)
     spec = BuildingSpec(name, tuple(zones), tuple(boundary), tuple(walls), tuple(distances),
-                        mult, w_s, source)
+                        mult, w_s, source, flows)
     _warn_isolated(spec)
     return spec
+
+
+def _flows(raw, src, zones, nodes) -> tuple:
+    """``flows:`` entries → :class:`Flow` objects (one-line errors naming the entry)."""
+    if not isinstance(raw, list):
+        raise SpecError(f"{src}: 'flows' must be a list")
+    out = []
+    for i, entry in enumerate(raw):
+        where = f"{src}: flows[{i}]"
+        _check_keys(entry, _FLOW_KEYS, where)
+        for k in ("from", "to"):
+            if k not in entry:
+                raise SpecError(f"{where}: missing {k!r} (the node the air comes from and the "
+                                "zone it enters)")
+        a, b = str(entry["from"]), str(entry["to"])
+        if a not in nodes:
+            raise SpecError(f"{where}.from: unknown node {a!r}; known nodes are {sorted(nodes)}")
+        if b not in zones:
+            raise SpecError(f"{where}.to: {b!r} is not a zone; the air enters a zone "
+                            f"(zones are {sorted(zones)})")
+        if a == b:
+            raise SpecError(f"{where}: 'from' and 'to' are both {a!r}")
+        if ("of" in entry) == ("column" in entry):
+            raise SpecError(f"{where}: give the rate as 'of: <zone>' (a fraction of that zone's "
+                            "supply flow ms:<zone>) or 'column: <name>' [kg/s], exactly one")
+        of = entry.get("of")
+        if of is not None and str(of) not in zones:
+            raise SpecError(f"{where}.of: {of!r} is not a zone (its ms: column gives the rate)")
+        frac = _positive(entry.get("fraction", 1.0), f"{where}.fraction", "[-]")
+        out.append(Flow(a, b, frac, None if of is None else str(of),
+                        None if "column" not in entry else str(entry["column"])))
+    return tuple(out)
 
 
 def _warn_isolated(spec: BuildingSpec) -> None:

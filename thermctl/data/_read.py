@@ -347,6 +347,15 @@ def _classify(columns, spec: BuildingSpec, src):
             used[f"Q:{z}"] = zone_cols[("Q", z)]
     for col in solar:
         used[col] = col
+    for f in spec.flows:
+        if f.column is None:
+            continue
+        if f.column not in columns:
+            raise DataError(f"{src}: column {f.column!r} missing: the spec's directed flow "
+                            f"{f.src} → {f.dst} takes its rate [kg/s] from it")
+        used[f.column] = f.column
+        if f.column in ignored:
+            ignored.remove(f.column)
     if unmeasured:
         warnings.warn(f"{src}: {unmeasured} belong to zone(s) the spec marks 'measured: false'; "
                       "ignored (set measured: true to use them)", DataWarning, stacklevel=3)

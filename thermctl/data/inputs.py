@@ -19,6 +19,11 @@ GAP_POLICIES = ("keep", "raise")
 def network_inputs(frame, network, *, gaps: str = "keep") -> np.ndarray:
     """Network inputs from ``T:<node>``, ``Ts:<zone>``, ``ms:<zone>``, ``Q:<zone>`` columns.
 
+    A directed flow of the spec (:class:`thermctl.spec.Flow`: ventilation air passed on
+    from ``src`` into ``dst``) joins ``dst``'s supply air: the zone's ``ms`` is the sum of
+    its own supply and the flows into it, ``Ts`` their flow-weighted temperature (``T:src``
+    for a flow), so the zone gains ``Σ ṁ_k·cp·(T_k − T_z)``.
+
     A zone without ``ms:`` gets no supply air (``ms = 0``) and a supply temperature that
     can never turn ``0·Ts`` into NaN: its own ``T:`` where measured, else the mean of the
     measured zones at that sample, else 20 °C (the value multiplies ``ms = 0``; it matters
@@ -63,14 +68,27 @@ def network_inputs(frame, network, *, gaps: str = "keep") -> np.ndarray:
     mean_t = np.where(np.isfinite(mean_t), mean_t, 20.0)
     ms, ts, q = [], [], []
     used = []
+    flows = _incoming_flows(frame, network, cols)
     for z in network.zones:
+        if f"ms:{z}" in cols and f"Ts:{z}" not in cols:
+            raise DataError(f"column 'Ts:{z}' missing: zone {z!r} has a supply flow "
+                            f"'ms:{z}' but no supply temperature")
+        parts = ([(frame[f"ms:{z}"].to_numpy(float), frame[f"Ts:{z}"].to_numpy(float))]
+                 if f"ms:{z}" in cols else []) + flows.get(z, [])
         if f"ms:{z}" in cols:
-            if f"Ts:{z}" not in cols:
-                raise DataError(f"column 'Ts:{z}' missing: zone {z!r} has a supply flow "
-                                f"'ms:{z}' but no supply temperature")
-            ms.append(frame[f"ms:{z}"].to_numpy(float))
-            ts.append(frame[f"Ts:{z}"].to_numpy(float))
             used += [f"ms:{z}", f"Ts:{z}"]
+        if len(parts) == 1:
+            ms.append(parts[0][0])
+            ts.append(parts[0][1])
+        elif parts:
+            # supply air and air passed on from other rooms mix: one flow at the
+            # flow-weighted temperature gives the zone the same Σ ṁ_k·cp·(T_k − T_z)
+            m = np.sum([p[0] for p in parts], axis=0)
+            h = np.sum([p[0] * p[1] for p in parts], axis=0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t_mix = np.where(m > 0, h / np.where(m > 0, m, 1.0), parts[0][1])
+            ms.append(m)
+            ts.append(t_mix)
         else:
             log.debug("zone %s has no 'ms:%s' column: no supply air", z, z)
             own = frame[f"T:{z}"].to_numpy(float) if f"T:{z}" in cols else mean_t
@@ -90,3 +108,23 @@ def network_inputs(frame, network, *, gaps: str = "keep") -> np.ndarray:
                 raise DataError(f"column {c!r} has {int(bad.sum())} missing value(s), first "
                                 f"at {frame.index[int(np.argmax(bad))]}")
     return np.column_stack(ms + ts + tb + q).astype(float)
+
+
+def _incoming_flows(frame, network, cols) -> dict:
+    """Zone → [(rate [kg/s], temperature [°C]), ...] of the spec's directed flows into it."""
+    out = {}
+    zones = set(network.zones)
+    for f in network.spec.flows:
+        if f.dst not in zones:
+            continue
+        where = f"directed flow {f.src} → {f.dst}"
+        if f.rate_column not in cols:
+            raise DataError(f"column {f.rate_column!r} missing: the {where} takes its rate "
+                            f"from it")
+        if f"T:{f.src}" not in cols:
+            raise DataError(f"column 'T:{f.src}' missing: the {where} needs the temperature "
+                            f"of the air it carries (a flow from an unmeasured zone cannot be "
+                            "an input)")
+        rate = f.fraction * frame[f.rate_column].to_numpy(float)
+        out.setdefault(f.dst, []).append((rate, frame[f"T:{f.src}"].to_numpy(float)))
+    return out
