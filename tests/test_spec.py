@@ -145,9 +145,9 @@ def _wall(d, i):
 
 
 ALLOWED = {
-    "top": r"\['boundary', 'capacity_multiplier', 'distances', 'flows', 'name', 'w_s', 'walls', 'zones'\]",
+    "top": r"\['boundary', 'capacity_multiplier', 'constructions', 'distances', 'flows', 'name', 'w_s', 'walls', 'zones'\]",
     "zone": r"\['capacitance', 'measured', 'volume'\]",
-    "wall": r"\['C', 'R', 'area', 'between', 'heat_capacity', 'name', 'u_value'\]",
+    "wall": r"\['C', 'R', 'area', 'between', 'construction', 'heat_capacity', 'name', 'u_value'\]",
     "distance": r"\['between', 'd'\]",
 }
 
@@ -296,13 +296,15 @@ def test_unknown_key_error_lists_every_allowed_key(small_spec_dict, level, mutat
         spec_from_dict(mutate(small_spec_dict))
     listed = re.search(r"allowed keys are \[(.*)\]", str(info.value)).group(1)
     expected = {"top": {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls",
-                        "distances", "flows"},
+                        "distances", "flows", "constructions"},
                 "zone": {"volume", "measured", "capacitance"},
-                "wall": {"between", "R", "C", "area", "u_value", "heat_capacity", "name"},
+                "wall": {"between", "R", "C", "area", "u_value", "heat_capacity", "name",
+                         "construction"},
                 "distance": {"between", "d"}}[level]
     assert {k.strip(" '") for k in listed.split(",")} == expected
     if level == "top":  # every BuildingSpec field (but the file name) can be set from a file
-        assert set(BuildingSpec.__dataclass_fields__) - {"source"} == expected
+        # ('constructions' only resolves walls: no field of its own)
+        assert set(BuildingSpec.__dataclass_fields__) - {"source"} == expected - {"constructions"}
 
 
 # ---------------------------------------------------------------------------------------------

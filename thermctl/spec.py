@@ -31,6 +31,7 @@ from .errors import SpecError, SpecWarning
 
 __all__ = [
     "Zone", "Wall", "Distance", "Flow", "BuildingSpec", "load_spec", "spec_from_dict",
+    "CONSTRUCTIONS",
     "RHO_AIR", "cp_moist_air", "OUTDOOR_NAMES", "is_outdoor",
 ]
 
@@ -76,9 +77,30 @@ def wall_class(a: str, b: str, zones) -> str:
 
 
 _TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances",
-             "flows"}
+             "flows", "constructions"}
 _ZONE_KEYS = {"volume", "measured", "capacitance"}
-_WALL_KEYS = {"between", "R", "C", "area", "u_value", "heat_capacity", "name"}
+_WALL_KEYS = {"between", "R", "C", "area", "u_value", "heat_capacity", "name", "construction"}
+_CONSTRUCTION_KEYS = {"u_value", "heat_capacity"}
+
+CONSTRUCTIONS = {
+    # name: (U [W/(m² K)] with surface films, areal heat capacity [J/(m² K)], layers).
+    # Computed from typical layers (λ, ρ, c of EN ISO 10456 tables; films 0.13 + 0.04
+    # exterior, 0.13 + 0.13 interior, 0.17 + 0.17 floors): a floor plan's first guess,
+    # right within about ±50 %. With --wall-factors the UA of each wall class is fitted
+    # within [0.2, 5] × these values.
+    "exterior-masonry-insulated": (0.30, 370e3, "240 mm brick, 100 mm insulation, plaster"),
+    "exterior-masonry": (1.50, 370e3, "240 mm brick, plaster, no insulation"),
+    "exterior-timber-frame": (0.25, 35e3, "gypsum, 160 mm mineral wool in studs, OSB"),
+    "partition-light": (1.90, 22e3, "gypsum stud wall, 2 × 12.5 mm boards, cavity"),
+    "partition-heavy": (2.10, 210e3, "115 mm brick, plaster both sides"),
+    "floor-concrete": (2.30, 460e3, "200 mm concrete slab, no insulation"),
+    "floor-concrete-insulated": (0.35, 460e3, "200 mm concrete slab, 100 mm insulation"),
+    "roof-insulated": (0.20, 30e3, "timber rafters, 200 mm mineral wool, gypsum"),
+    "window-double": (2.80, 15e3, "double glazing, air fill, frame included"),
+    "window-triple": (1.00, 20e3, "triple glazing, low-e, argon, frame included"),
+    "door-internal": (1.80, 30e3, "40 mm wooden leaf"),
+}
+"""Built-in wall constructions a spec names with ``construction:`` (see docs/model.md)."""
 _DIST_KEYS = {"between", "d"}
 _FLOW_KEYS = {"from", "to", "fraction", "of", "column"}
 
@@ -119,6 +141,9 @@ class Wall:
     area : float or None
         [m²], informative.
     name : str or None
+    construction : str or None
+        The construction it was built from (:data:`CONSTRUCTIONS` or the spec's
+        ``constructions``), informative.
     """
 
     a: str
@@ -127,6 +152,7 @@ class Wall:
     C: tuple[float, float]
     area: float | None = None
     name: str | None = None
+    construction: str | None = None
 
     @property
     def alpha(self) -> float:
@@ -463,6 +489,7 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
         raise SpecError(f"{src}: {clash} named both as zone and as boundary node")
     nodes = {z.name for z in zones} | set(boundary)
 
+    constructions = _constructions(data.get("constructions") or {}, src)
     walls = []
     raw_walls = data["walls"] or []
     if not isinstance(raw_walls, list):
@@ -475,6 +502,18 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
         if a in boundary and b in boundary:
             raise SpecError(f"{where}: joins two boundary nodes {a!r} and {b!r}; it affects no zone")
         has_rc = "R" in entry or "C" in entry
+        cons = entry.get("construction")
+        if cons is not None:
+            if has_rc:
+                raise SpecError(f"{where}: give either R/C or a construction, not both")
+            if str(cons) not in constructions:
+                raise SpecError(f"{where}.construction: unknown construction {cons!r}; known "
+                                f"are {sorted(constructions)} (or define it under "
+                                "'constructions')")
+            if "area" not in entry:
+                raise SpecError(f"{where}: missing 'area' [m²] (needed with a construction)")
+            u0, k0 = constructions[str(cons)]
+            entry = {"u_value": u0, "heat_capacity": k0} | dict(entry)   # given values win
         has_u = any(k in entry for k in ("u_value", "heat_capacity"))
         if has_rc and has_u:
             raise SpecError(f"{where}: give either R/C or area/u_value/heat_capacity, not both")
@@ -504,7 +543,7 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
             if wname in wall_names:
                 raise SpecError(f"{where}: duplicate wall name {wname!r}")
             wall_names.add(wname)
-        walls.append(Wall(a, b, R, C, area, wname))
+        walls.append(Wall(a, b, R, C, area, wname, None if cons is None else str(cons)))
 
     distances = []
     raw_d = data.get("distances") or []
@@ -533,6 +572,25 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
                         mult, w_s, source, flows)
     _warn_isolated(spec)
     return spec
+
+
+def _constructions(raw, src) -> dict:
+    """The built-in :data:`CONSTRUCTIONS` plus the spec's own (which may override them):
+    name → (U [W/(m² K)], areal heat capacity [J/(m² K)])."""
+    out = {k: v[:2] for k, v in CONSTRUCTIONS.items()}
+    if not isinstance(raw, dict):
+        raise SpecError(f"{src}: 'constructions' must be a mapping of name → "
+                        "{u_value: ..., heat_capacity: ...}")
+    for name, entry in raw.items():
+        where = f"{src}: constructions.{name}"
+        _check_keys(entry, _CONSTRUCTION_KEYS, where)
+        for k in _CONSTRUCTION_KEYS:
+            if k not in entry:
+                raise SpecError(f"{where}: missing {k!r}")
+        out[str(name)] = (_positive(entry["u_value"], f"{where}.u_value", "[W/(m² K)]"),
+                          _positive(entry["heat_capacity"], f"{where}.heat_capacity",
+                                    "[J/(m² K)]"))
+    return out
 
 
 def _flows(raw, src, zones, nodes) -> tuple:
