@@ -16,6 +16,7 @@ import numpy as np
 
 from ..data.days import day_array
 from ..errors import DataError
+from .identifier import StructureIdentifier
 from .sin import _partial, _sin_from_partial
 
 __all__ = ["NeighbourhoodStructureIdentifier", "neighbourhood_scores"]
@@ -244,10 +245,5 @@ class NeighbourhoodStructureIdentifier:
         self.network_ = network.with_convection([(e.a, e.b, e.d) for e in self.edges_])
         return self
 
-    def pair_index(self, a: str, b: str) -> tuple[int, int]:
-        """Indices of two measured zones into ``score_matrix_``."""
-        try:
-            return self.zones_.index(a), self.zones_.index(b)
-        except ValueError:
-            raise DataError(f"({a!r}, {b!r}): both must be measured zones of the fit, "
-                            f"{self.zones_}") from None
+    # indices of two measured zones into ``score_matrix_``: as the building's identifier
+    pair_index = StructureIdentifier.pair_index
