@@ -40,6 +40,13 @@ model's own L-stable Radau IIA (Padé 1/2) rational step, the same as
 
 Both give the same optimum (the tests check it). Warm start: the previous primal and dual
 solution shifted by one step (last step repeated), IPOPT ``warm_start_init_point``.
+
+Building scale (docs/mpc.md, "The economic NMPC at building scale"): ``steps=`` gives a
+non-uniform prediction grid (an hour of 10-min steps, then 1-h steps: 11 instead of 36
+steps), ``rti_iter=`` a real-time iteration (IPOPT stopped after a few iterations per
+step). On the 49-zone floor (661 states) with that grid: 0.99 s CPU per step with two
+iterations, 8.4 s converged; the real-time iteration's control cost is measured there
+(on 7 zones, 4 h: +4 to +29 % site energy against converged solves).
 """
 
 from __future__ import annotations
