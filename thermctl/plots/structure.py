@@ -20,7 +20,7 @@ __all__ = ["plot_network", "plot_scores", "plot_correlations"]
 
 
 def _check_fitted(sid):
-    if not hasattr(sid, "edges_"):
+    if not hasattr(sid, "network_"):    # set last by either identifier's fit
         raise DataError("the StructureIdentifier is not fitted; call fit(data, network) first")
 
 
