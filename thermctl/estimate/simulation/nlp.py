@@ -153,6 +153,7 @@ def radau_substeps(problem, eta, x0, substeps: int) -> np.ndarray:
     U = problem.U_sim
     out = np.empty((len(U) * substeps, problem.network.n_states))
     steppers = {}
+    b = sim.forcing(eta)
     x = np.asarray(x0, dtype=float)
     for k in range(len(U)):
         j = sim.inverse[k]
@@ -160,7 +161,7 @@ def radau_substeps(problem, eta, x0, substeps: int) -> np.ndarray:
             A_u, _ = model.affine(U[k], mats=mats)
             steppers[j] = make_stepper(A_u, h, "radau", 1)
         for i in range(substeps):
-            x = steppers[j](x, sim.b[k])
+            x = steppers[j](x, b[k])
             out[k * substeps + i] = x
     return out
 
