@@ -98,3 +98,14 @@ def test_missing_columns_and_local_problems():
         network_inputs(f, ThermalNetwork(s))
     p = [p for p in local_problems(s, _frame().columns) if p.zone == "b"][0]
     assert p.spec.flows == s.flows and "vent" in p.columns and "T:a" in p.columns
+
+
+def test_export_operating_point_sees_the_flows():
+    from thermctl.data import read_measurements
+    from thermctl.export.point import supply_zones, typical_inputs
+    s = _spec([{"from": "b", "to": "c", "of": "a", "fraction": 0.5}])
+    f = _frame(n=24).reset_index(names="time").drop(columns=["vent"])
+    meas = read_measurements(f, s, name="flows")
+    assert supply_zones(meas) == ["a", "b", "c"]
+    op = typical_inputs(meas, ThermalNetwork(s))
+    assert op["ms"]["c"] == pytest.approx(0.02) and op["Ts"]["c"] == pytest.approx(19.0)

@@ -521,8 +521,8 @@ def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: 
     for name, m in models.items():
         U = win.inputs(m.network)[:-1]
         results[name] = open_loop(m, U, Y, dt, Tb0, zones=net.measured_zones)
-    ms_min = minimum_flows(meas.frame[[f"ms:{z}" for z in net.zones if f"ms:{z}" in meas.frame]]
-                           .reindex(columns=[f"ms:{z}" for z in net.zones], fill_value=0.0).to_numpy())
+    # from the inputs, not the ms: columns: a zone fed by a directed flow has supply air too
+    ms_min = minimum_flows(meas.inputs(net)[:, net.input_slices()["ms"]])
     G = {name: step_response_matrix(m, ms_min, horizons_h) for name, m in models.items()}
     errors = {}
     if truth is not None:

@@ -20,15 +20,18 @@ _UNITS = {"ms": "kg/s", "Ts": "°C", "T": "°C", "Q": "W"}
 
 
 def supply_zones(meas) -> list[str]:
-    """Zones whose data have supply air: an ``ms:`` column with some flow above zero.
+    """Zones whose data have supply air: an ``ms:`` column with some flow above zero, or a
+    directed flow of the spec into the zone (:class:`thermctl.spec.Flow`).
 
     Parameters
     ----------
     meas : thermctl.data.Measurements
     """
     f = meas.frame
+    fed = {fl.dst for fl in meas.spec.flows}
     return [z for z in meas.spec.zone_names
-            if f"ms:{z}" in f and np.nanmax(np.r_[f[f"ms:{z}"].to_numpy(), 0.0]) > _ON]
+            if z in fed or (f"ms:{z}" in f
+                            and np.nanmax(np.r_[f[f"ms:{z}"].to_numpy(), 0.0]) > _ON)]
 
 
 def typical_inputs(meas, network) -> dict:
