@@ -92,9 +92,9 @@ def identify(
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
-    wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria, whole-"
-                                      "building fits: fit a UA factor per wall class (exterior, "
-                                      "partition, other boundary)."),
+    wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria: fit a UA "
+                                      "factor per wall class (exterior, partition, other "
+                                      "boundary); local problems: the median of theirs."),
     min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model: t "
                                 "statistic of its daily likelihood gains an edge must reach as "
                                 "well (holds under model misfit, unlike BIC); 0: off."),
