@@ -105,12 +105,18 @@ class DRScenario(Scenario):
         return (np.where(on, ts.on_peak, ts.off_peak), np.full(len(h), ts.fuel),
                 np.where(event, self.cap_kw, np.inf))
 
-    def forecast(self, k, N, every, gains, T_c):
-        fc = super().forecast(k, N, every, gains, T_c)
+    def forecast(self, k, N, every, gains, T_c, steps=None):
+        fc = super().forecast(k, N, every, gains, T_c, steps=steps)
         d = self.tb.disturbances
-        t = d.time[self.k0 + k + every * np.arange(N)]
-        el, fuel, cap = self.prices(t)
-        fc.tariff = Tariff(elec=el, heat=fuel, demand=self.tariff.demand, elec_cap=cap,
+        lengths = every * (np.ones(N, int) if steps is None else np.asarray(steps, int))
+        starts = np.cumsum(lengths) - lengths
+        a = self.k0 + k
+        # prices at every plant step of the horizon: a long (coarse-grid) step pays their
+        # mean, and its cap is the tightest one inside it (a 2-h event within a 60-min step)
+        el, fuel, cap = (np.asarray(v, float) for v in self.prices(d.time[a: a + lengths.sum()]))
+        fc.tariff = Tariff(elec=np.add.reduceat(el, starts) / lengths,
+                           heat=np.add.reduceat(fuel, starts) / lengths,
+                           demand=self.tariff.demand, elec_cap=np.minimum.reduceat(cap, starts),
                            cap_penalty=self.tariff.cap_penalty)
         return fc
 
