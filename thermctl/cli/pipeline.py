@@ -95,9 +95,10 @@ def identify(
     wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria: fit a UA "
                                       "factor per wall class (exterior, partition, other "
                                       "boundary); local problems: the median of theirs."),
-    min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model: t "
-                                "statistic of its daily likelihood gains an edge must reach as "
-                                "well (holds under model misfit, unlike BIC); 0: off."),
+    min_t: float = typer.Option(_D.selection.min_t, "--min-t", help="--selection model, whole "
+                                "building: t statistic of its daily likelihood gains an edge "
+                                "must reach as well (holds under model misfit, unlike BIC); 0: "
+                                "off (local problems: --local-min-t)."),
     stability: int = typer.Option(_D.selection.stability, "--stability", min=0,
                                   help="--selection model: stability selection with this many "
                                   "resamples of half the calibration days (blocks of 2 days); "
@@ -159,6 +160,10 @@ def identify(
     latent_depth: int = typer.Option(_D.split.latent_depth, min=1, help="Local problems: "
                                      "unmeasured zones a problem holds, in hops; beyond, a "
                                      "steady-state proxy."),
+    local_min_t: float = typer.Option(_D.split.min_t, "--local-min-t", help="Local problems: "
+                                      "daily-gain t statistic an air path must reach (a "
+                                      "neighbour sharing the zone's disturbances passes BIC "
+                                      "but not day after day); 0: off."),
     columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
                                  "column), e.g. from `thermctl spec from-brick`."),
 ):
@@ -200,7 +205,7 @@ def identify(
                                      internal_mass=internal_mass, wall_factors=wall_factors),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
-                           latent_depth=latent_depth),
+                           latent_depth=latent_depth, min_t=local_min_t),
         calibration=_window(calibration, "--calibration"),
         validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:
