@@ -265,6 +265,11 @@ class SplitOptions:
     latent_depth: int | None = 1
     min_t: float = 2.0
 
+    def splits(self, n_measured: int) -> bool:
+        """Whether a building of ``n_measured`` measured zones is split into local problems
+        (``scale``, or above ``local_above`` zones with ``auto``)."""
+        return self.scale == "local" or (self.scale == "auto" and n_measured > self.local_above)
+
     def check(self):
         _one_of("split", "scale", self.scale, ("auto", "global", "local"))
         if not self.min_t >= 0:
@@ -348,9 +353,9 @@ class IdentifyOptions:
 
     def is_local(self, spec) -> bool:
         """Whether this building is identified by local problems."""
-        if self.selection_method == "scores" or self.split.scale == "global":
+        if self.selection_method == "scores":
             return False
-        return self.split.scale == "local" or len(spec.measured_zones) > self.split.local_above
+        return self.split.splits(len(spec.measured_zones))
 
     @property
     def paper(self) -> bool:
@@ -1068,8 +1073,7 @@ def _estimate(net, cal, opt, progress, notes=None):
     from .estimate.simulation import CostProblem, fit, grid_search
 
     sp = opt.split
-    local = sp.scale == "local" or (sp.scale == "auto"
-                                    and len(net.measured_zones) > sp.local_above)
+    local = sp.splits(len(net.measured_zones))
     method = "multiple_shooting" if opt.estimation.estimator == "nlp" else "single_shooting"
     if local:
         # the whole building's J needs an eigendecomposition of the full state matrix per
