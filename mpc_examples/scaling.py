@@ -52,7 +52,7 @@ from .common import format_table
 from .economic_mpc import EconomicMPC
 from .linear_mpc import LinearMPC
 from .model import min_flow_point
-from .simulator import make_scenario
+from .simulator import box_inputs, make_scenario
 from .sparse import eliminate_fast_edges
 
 __all__ = ["main", "state_feedback_run"]
@@ -82,10 +82,7 @@ def state_feedback_run(scn, mpc, to_model_state, n_solves: int):
         wall.append(sol.solve_time)
         cpu.append(sol.cpu_time)
         fails += not sol.success
-        ms = np.zeros(nz)
-        ms[sup] = sol.ms[0][sup]
-        Ts = np.full(nz, meas.T_ahu)
-        Ts[sup] = np.maximum(sol.Ts[0][sup], meas.T_ahu)
+        ms, Ts = box_inputs(sol.ms[0], sol.Ts[0], sup, meas.T_ahu)
         for _ in range(every):
             plant.step(ms, Ts)
     return np.asarray(wall), np.asarray(cpu), fails

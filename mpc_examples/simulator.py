@@ -211,6 +211,26 @@ def band_baseline(scn: Scenario, margin: float = 0.5) -> VAVController:
                          tb.controller.settings, scn.dt)
 
 
+def box_inputs(ms_cmd, Ts_cmd, supplied, T_ahu: float):
+    """What the VAV boxes apply of a plan's input: flow and supply temperature where a box
+    is (``supplied``: its zone indices), no flow elsewhere, and a supply temperature never
+    below the air-handling unit's ``T_ahu`` [°C] (a box can only reheat).
+
+    Returns
+    -------
+    ms : ndarray
+        [kg/s] per zone.
+    Ts : ndarray
+        [°C] per zone (``T_ahu`` where no box).
+    """
+    n = len(ms_cmd)
+    ms = np.zeros(n)
+    ms[supplied] = np.asarray(ms_cmd)[supplied]
+    Ts = np.full(n, float(T_ahu))
+    Ts[supplied] = np.maximum(np.asarray(Ts_cmd)[supplied], T_ahu)
+    return ms, Ts
+
+
 def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.35,
             warmup_hours: float = 48.0,
             progress: bool = False) -> ClosedLoopResult:
@@ -272,10 +292,7 @@ def run_mpc(scn: Scenario, mpc, model, name: str, backoff: float = 0.35,
             if progress and (k // every) % 16 == 0:
                 log.info("%s: %s, step %d/%d, solve %.3f s (%s)", name, fc.hvac_on[0],
                          k // every, scn.n_steps // every, sol.solve_time, sol.status)
-        ms = np.zeros(net.n_zones)
-        ms[sup] = ms_cmd[sup]
-        Ts = np.full(net.n_zones, meas.T_ahu)
-        Ts[sup] = np.maximum(Ts_cmd[sup], meas.T_ahu)  # a VAV box can only reheat
+        ms, Ts = box_inputs(ms_cmd, Ts_cmd, sup, meas.T_ahu)
         u_sum[sl["ms"]] += ms
         u_sum[sl["Ts"]] += Ts
         u_sum[sl["T"]] += meas.T_boundary

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mpc_examples.economic_mpc import EconomicMPC, _shift_maps
+from mpc_examples.simulator import box_inputs
 
 GRID = [1] * 6 + [6] * 5   # the first hour in 10-min steps, then 1-h steps to 6 h
 
@@ -25,11 +26,7 @@ def scn():
 
 def _apply(scn, plant, sol, meas, every=10):
     """Hold the plan's first input for one 10-min control step (boxes only reheat)."""
-    nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
-    ms = np.zeros(nz)
-    ms[sup] = sol.ms[0][sup]
-    Ts = np.full(nz, meas.T_ahu)
-    Ts[sup] = np.maximum(sol.Ts[0][sup], meas.T_ahu)
+    ms, Ts = box_inputs(sol.ms[0], sol.Ts[0], scn.hvac.supplied, meas.T_ahu)
     for _ in range(every):
         plant.step(ms, Ts)
 
