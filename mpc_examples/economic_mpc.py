@@ -37,8 +37,12 @@ model's own L-stable Radau IIA (Padé 1/2) rational step, the same as
     (nonsingular) matrix :math:`D`; written with the model's ``f(x, u, p)`` only, it is
     polynomial and as sparse as the network, so IPOPT's Jacobian and Hessian stay sparse.
     With ``substeps > 1`` the intermediate states become decision variables.
+``euler``
+    :math:`x_{k+1} - x_k - h f(x_{k+1}, u_k) = 0`: implicit Euler (first order, L-stable),
+    the linear MPC's default step. Its rows are one-hop (``A``, not ``A²``), so the QP of the
+    SQP real-time iteration factors as fast as the linear MPC's; not the same optimum.
 
-Both give the same optimum (the tests check it). Warm start: the previous primal and dual
+``implicit`` and ``explicit`` give the same optimum (the tests check it). Warm start: the previous primal and dual
 solution shifted by one step (last step repeated), IPOPT ``warm_start_init_point``.
 
 Building scale (docs/mpc.md, "The economic NMPC at building scale"): ``steps=`` gives a
@@ -62,9 +66,13 @@ from thermctl._step import radau_residual
 from thermctl.model import ThermalModel
 
 from .common import Forecast, HVACModel, MPCSolution, RecedingHorizonMPC
-from .sparse import at_flow, casadi_rhs, radau_row_scale
+from .sparse import at_flow, casadi_rhs, row_scale
 
-__all__ = ["EconomicWeights", "EconomicMPC", "main"]
+__all__ = ["EconomicWeights", "EconomicMPC", "TRANSCRIPTIONS", "main"]
+
+TRANSCRIPTIONS = ("implicit", "euler", "explicit")
+"""The economic MPC's step rows (the module docstring): Radau, sparse (default); implicit
+Euler, sparse and one-hop; Radau through its dense solve."""
 
 log = logging.getLogger(__name__)
 
@@ -174,7 +182,10 @@ class EconomicMPC(RecedingHorizonMPC):
     substeps : int
         Radau sub-steps per MPC step (1 is accurate to about 1 % on the slowest
         decay factor per step at dt = 15 min; see docs/mpc.md).
-    transcription : {"implicit", "explicit"}
+    transcription : {"implicit", "euler", "explicit"}
+        See the module docstring. ``euler`` (implicit Euler, first order) keeps every row
+        one-hop like the linear MPC's: the SQP real-time iteration's QP then factors as
+        fast as the linear MPC's (the Radau rows carry A², two-hop: measured in docs/mpc.md).
     weights : EconomicWeights
     max_iter : int
         IPOPT iteration limit per (fully converged) solve.
@@ -187,12 +198,20 @@ class EconomicMPC(RecedingHorizonMPC):
         ``substeps`` Radau sub-steps of its own length; energy and comfort are priced over
         each step's length, the band is checked at the step ends only.
     rti_iter : int, optional
-        Real-time iteration: after the first (cold, converged) solve, stop IPOPT after this
-        many iterations from the shifted previous primal-dual solution (``warm_start_init_point``,
-        barrier parameter 1e-5, bound pushes 1e-5) instead of converging; what is left of the
-        optimization is carried to the next step in the warm start. None (default):
-        converge every step. ``rti_iter`` may be changed between solves (an IPOPT
-        ``iteration_callback`` counts the iterations; the RTI solver is built on first use).
+        Real-time iteration: after the first (cold, converged) solve, take this many
+        iterations from the shifted previous primal-dual solution instead of converging;
+        what is left of the optimization is carried to the next step. None (default):
+        converge every step. May be changed between solves (the RTI solver is built on
+        first use).
+    rti_method : {"sqp", "ipopt"}
+        ``sqp`` (default): each iteration one convex QP, the constraints linearized and a
+        Gauss-Newton Hessian (the convex terms' curvature), solved by ``qp_solver``
+        (:class:`_SQPRealTimeIteration`). ``ipopt``: IPOPT stopped after ``rti_iter``
+        iterations (``warm_start_init_point``, barrier parameter 1e-5, bound pushes 1e-5;
+        an ``iteration_callback`` counts them): its iterates carry a barrier-shifted active
+        set, measured far worse in closed loop (docs/mpc.md).
+    qp_solver : str
+        ``casadi.conic`` plugin of the SQP real-time iteration (default ``piqp``).
 
     Examples
     --------
@@ -204,9 +223,10 @@ class EconomicMPC(RecedingHorizonMPC):
     def __init__(self, model: ThermalModel, hvac: HVACModel, comfort_zones, dt: float = 900.0,
                  horizon: int = 24, substeps: int = 1, transcription: str = "implicit",
                  weights: EconomicWeights = EconomicWeights(), max_iter: int = 300,
-                 steps=None, rti_iter: int | None = None):
-        if transcription not in ("implicit", "explicit"):
-            raise ValueError(f"transcription must be 'implicit' or 'explicit', found {transcription!r}")
+                 steps=None, rti_iter: int | None = None, rti_method: str = "sqp",
+                 qp_solver: str = "piqp"):
+        if transcription not in TRANSCRIPTIONS:
+            raise ValueError(f"transcription must be one of {TRANSCRIPTIONS}, found {transcription!r}")
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be a positive integer, found {substeps!r}")
         super().__init__(model, hvac, comfort_zones, dt, horizon, weights)
@@ -215,6 +235,9 @@ class EconomicMPC(RecedingHorizonMPC):
             raise ValueError(f"steps must be {self.N} positive integers, found {steps!r}")
         if rti_iter is not None and (int(rti_iter) != rti_iter or rti_iter < 1):
             raise ValueError(f"rti_iter must be a positive integer or None, found {rti_iter!r}")
+        if rti_method not in ("sqp", "ipopt"):
+            raise ValueError(f"rti_method must be 'sqp' or 'ipopt', found {rti_method!r}")
+        self.rti_method, self.qp_solver = rti_method, qp_solver
         self.steps = steps.astype(int)
         self.h = self.dt * self.steps   # [s] length of each prediction step
         self.rti_iter = None if rti_iter is None else int(rti_iter)
@@ -230,7 +253,7 @@ class EconomicMPC(RecedingHorizonMPC):
         net, hv, w = self.model.network, self.hvac, self.weights
         nx, nz, nb = net.n_states, net.n_zones, len(net.boundary)
         N, s, ns, nc = self.N, self.s, len(self.sup), len(self.comfort_idx)
-        implicit = self.transcription == "implicit"
+        implicit = self.transcription != "explicit"    # symbolic sparse rows
         sym = ca.SX.sym if implicit else ca.MX.sym
         nn = N * s + 1 if implicit else N + 1
         X = sym("X", nx, nn)
@@ -339,11 +362,15 @@ class EconomicMPC(RecedingHorizonMPC):
         self._stop = _IterationLimit(wv.numel(), gv.numel(), pv.numel())
         self._rti_opts["iteration_callback"] = self._stop
         self._rti = None
-        if self.rti_iter is not None:
-            self._rti_solver()
         self.n_nonzeros = _kkt_nonzeros(self._warm)
         self._diag = ca.Function("diag", [wv, pv], [energy, comfort, move],
                                  ["w", "p"], ["energy", "comfort", "move"])
+        # the SQP real-time iteration's Gauss-Newton model: the curvature of the convex
+        # terms only (fan power, comfort slacks, moves); built on first use
+        self._gn = (ca.sum2(dth * fan) + comfort + move, wv, pv)
+        self._sqp = None
+        if self.rti_iter is not None:
+            self._rti_solver() if self.rti_method == "ipopt" else self._sqp_solver()
 
     def _rti_solver(self):
         """The real-time-iteration solver, built on first use (its build time is added to
@@ -355,8 +382,20 @@ class EconomicMPC(RecedingHorizonMPC):
                 self.build_time += time.perf_counter() - t0
         return self._rti
 
+    def _sqp_solver(self):
+        """The SQP real-time iteration (:class:`_SQPRealTimeIteration`), built on first use
+        (its build time is added to ``build_time``)."""
+        if self._sqp is None:
+            t0 = time.perf_counter()
+            Jc, wv, pv = self._gn
+            self._sqp = _SQPRealTimeIteration(self._nlp, Jc, wv, pv, self.qp_solver)
+            if hasattr(self, "build_time"):
+                self.build_time += time.perf_counter() - t0
+        return self._sqp
+
     def _implicit_residual(self, h: float) -> ca.Function:
-        """``G(xa, xb, u)``: ``D xb − N xa − c`` of one Radau sub-step of ``h`` [s], from ``f`` only."""
+        """``G(xa, xb, u)``: ``D xb − N xa − c`` of one Radau sub-step of ``h`` [s] (``implicit``)
+        or ``xb − xa − h f(xb, u)`` of an implicit-Euler one (``euler``), from ``f`` only."""
         f = casadi_rhs(self.model)   # sparse also for a ReducedNetwork
         nx, nu = self.model.network.n_states, self.model.network.n_inputs
         xa, xb, u = ca.SX.sym("xa", nx), ca.SX.sym("xb", nx), ca.SX.sym("u", nu)
@@ -364,8 +403,9 @@ class EconomicMPC(RecedingHorizonMPC):
         Au = lambda v: f(v, u) - b  # noqa: E731  (f is affine in x: A_u v = f(v) − f(0))
         # rows scaled by their largest coefficient at the minimum flows (fast states have
         # h²/6·|A|² entries of 1e3 and more): the same constraints, a better-conditioned KKT
-        scale = radau_row_scale(at_flow(self.model, self.hvac.ms_min), h)
-        r = ca.DM(scale) * radau_residual(Au, xa, xb, b, h)
+        euler = self.transcription == "euler"
+        scale = row_scale(at_flow(self.model, self.hvac.ms_min), h, "euler" if euler else "radau")
+        r = ca.DM(scale) * (xb - xa - h * f(xb, u) if euler else radau_residual(Au, xa, xb, b, h))
         return ca.Function("G", [xa, xb, u], [r], ["xa", "xb", "u"], ["residual"])
 
     # ---- solve -------------------------------------------------------------
@@ -400,7 +440,7 @@ class EconomicMPC(RecedingHorizonMPC):
         ms_all[:, self.sup] = (phi * np.asarray(hv.ms_max, float)[self.sup, None]).T
         Ts_all = np.full((N, net.n_zones), 20.0)
         U = np.column_stack([ms_all, Ts_all, fc.T_boundary[:N], fc.gains[:N]])
-        nodes = s if self.transcription == "implicit" else 1
+        nodes = s if self.transcription != "explicit" else 1
         # exact (dense expm) for small models, the sparse Radau step for big ones; simulated
         # at dt / nodes (every grid node lies on it: node j of step k at (start_k + j m_k / s) dt)
         big = net.n_states > 400
@@ -461,24 +501,33 @@ class EconomicMPC(RecedingHorizonMPC):
         lbx, ubx = self._bounds(fc)
         cold = dict(x0=self._cold_guess(np.asarray(x0, float), fc))
         rti = warm and prev is not None and self.rti_iter is not None
-        if rti:
-            self._rti_solver()   # built before the clock starts
+        sqp = rti and self.rti_method == "sqp"
+        if rti:   # built before the clock starts
+            self._sqp_solver() if sqp else self._rti_solver()
         t0, c0 = time.perf_counter(), time.process_time()
-        if warm and prev is not None:
+        r = st = None
+        x_shift = None if prev is None else np.clip(self._wb.shift(prev["x"]), lbx, ubx)
+        if sqp:
+            w, lam_x, lam_g, f, ok, msg = self._sqp.solve(x_shift, P, lbx, ubx, self._lbg,
+                                                          self._ubg, self.rti_iter)
+            if ok:
+                r = {"x": w, "lam_x": lam_x, "lam_g": lam_g, "f": f}
+                st = {"return_status": msg, "iter_count": self.rti_iter, "success": True}
+            else:
+                log.info("economic MPC: %s, solving cold", msg)
+        elif warm and prev is not None:
             solver = self._rti if rti else self._warm
             self._stop.arm(self.rti_iter)
-            r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg,
-                       x0=np.clip(self._wb.shift(prev["x"]), lbx, ubx),
+            r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, x0=x_shift,
                        lam_x0=self._wb.shift(prev["lam_x"]), lam_g0=self._gb.shift(prev["lam_g"]))
             self._stop.arm(None)
-            ok = _accepted(solver.stats(), r)
-            if not ok:  # a bad warm start (after a large disturbance) can stall IPOPT
-                log.info("economic MPC: warm solve failed (%s), retrying cold",
-                         solver.stats()["return_status"])
-        if not (warm and prev is not None) or not ok:
-            solver = self._cold
-            r = solver(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, **cold)
-        st = solver.stats()
+            st = solver.stats()
+            if not _accepted(st, r):  # a bad warm start (after a large disturbance) can stall IPOPT
+                log.info("economic MPC: warm solve failed (%s), retrying cold", st["return_status"])
+                r = None
+        if r is None:
+            r = self._cold(p=P, lbx=lbx, ubx=ubx, lbg=self._lbg, ubg=self._ubg, **cold)
+            st = self._cold.stats()
         ok = _accepted(st, r)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         wsol = np.asarray(r["x"]).ravel()
@@ -489,7 +538,7 @@ class EconomicMPC(RecedingHorizonMPC):
         Ts = np.repeat(np.asarray(fc.T_c[:N], float)[:, None], nz, axis=1)
         ms[:, self.sup] = (self._wb.get(wsol, "phi") * np.asarray(self.hvac.ms_max, float)[self.sup, None]).T
         Ts[:, self.sup] = self._wb.get(wsol, "Ts").T
-        X = self._wb.get(wsol, "X")[:, :: (self.s if self.transcription == "implicit" else 1)].T
+        X = self._wb.get(wsol, "X")[:, :: (self.s if self.transcription != "explicit" else 1)].T
         return MPCSolution(ms=np.maximum(ms, 0.0), Ts=Ts, X=X, success=ok,
                            status=str(st["return_status"]), iterations=int(st["iter_count"]),
                            solve_time=wall, cpu_time=cpu, cost=float(r["f"]))
@@ -498,6 +547,68 @@ class EconomicMPC(RecedingHorizonMPC):
         """Energy [kWh], comfort penalty and move penalty of a solution vector."""
         e, c, m = self._diag(sol_vector, P)
         return {"energy": float(e), "comfort": float(c), "move": float(m)}
+
+
+class _SQPRealTimeIteration:
+    """Real-time iteration as SQP steps: each a convex QP solved by a sparse ``casadi.conic``.
+
+    At the (shifted) previous solution ``w`` the NLP's constraints are linearized and its
+    objective replaced by its gradient plus a Gauss-Newton Hessian: the curvature of the
+    convex terms only (fan power, the comfort slacks' squares, the move penalties). The
+    bilinear terms (flow × temperature in the dynamics, reheat and coil) keep their first
+    order only, so the QP is convex and PIQP solves it in the linear MPC's time. A full step
+    ``w + Δw`` is taken and the QP's multipliers become the next ones (Diehl, Bock and
+    Schlöder 2005, "A real-time iteration scheme for nonlinear optimization in optimal
+    feedback control"; Gros et al. 2020, "From linear to nonlinear MPC: bridging the gap via
+    the real-time iteration"). The current state enters through the linearized initial-value
+    row ``X₀ − x₀ = 0`` (initial value embedding).
+
+    Parameters
+    ----------
+    nlp : dict
+        CasADi NLP (``x``, ``p``, ``f``, ``g``; SX).
+    J_convex : casadi.SX
+        The convex part of ``f`` whose Hessian is the QP's.
+    wv, pv : casadi.SX
+        The NLP's variables and parameters.
+    qp_solver : str
+        ``casadi.conic`` plugin (``piqp``, ``osqp``, ``highs``...).
+    """
+
+    def __init__(self, nlp, J_convex, wv, pv, qp_solver: str = "piqp"):
+        f, g = nlp["f"], nlp["g"]
+        H, _ = ca.hessian(J_convex, wv)
+        Jg = ca.jacobian(g, wv)
+        self.lin = ca.Function("economic_rti_lin", [wv, pv], [ca.gradient(f, wv), g, Jg, H])
+        self.f = ca.Function("economic_rti_f", [wv, pv], [f])
+        opts = {"error_on_fail": False}
+        if qp_solver == "osqp":
+            opts["osqp"] = {"verbose": False, "eps_abs": 1e-6, "eps_rel": 1e-6,
+                            "max_iter": 50000, "polish": True}
+        elif qp_solver == "highs":
+            opts["highs"] = {"output_flag": False}
+        self.qp = ca.conic("economic_rti_qp", qp_solver,
+                           {"h": H.sparsity(), "a": Jg.sparsity()}, opts)
+        self.qp_solver = qp_solver
+
+    def solve(self, w, P, lbx, ubx, lbg, ubg, iterations: int):
+        """``iterations`` SQP steps from ``w``; returns (w, lam_x, lam_g, f, success, message)."""
+        w = np.asarray(w, float).copy()
+        lam_x = lam_g = None
+        ok, msg = True, "SQP_RTI"
+        for _ in range(iterations):
+            grad, gval, Jg, H = self.lin(w, P)
+            gval = np.asarray(gval).ravel()
+            r = self.qp(h=H, g=grad, a=Jg, lba=lbg - gval, uba=ubg - gval,
+                        lbx=lbx - w, ubx=ubx - w)
+            st = self.qp.stats()
+            dw = np.asarray(r["x"]).ravel()
+            if not st["success"] or not np.all(np.isfinite(dw)):
+                ok, msg = False, f"SQP_RTI QP failed: {st.get('return_status', '?')}"
+                break
+            w = np.clip(w + dw, lbx, ubx)   # clip: the QP's bounds hold to its tolerance only
+            lam_x, lam_g = np.asarray(r["lam_x"]).ravel(), np.asarray(r["lam_a"]).ravel()
+        return w, lam_x, lam_g, float(self.f(w, P)), ok, msg
 
 
 class _IterationLimit(ca.Callback):

@@ -3,14 +3,17 @@
 Run from the repository root::
 
     python -m mpc_examples.rti_study --zones 7 --hours 4 --rti 0 1 2 3 --grid uniform "6x1 5x6"
+    python -m mpc_examples.rti_study --zones 7 --hours 4 --rti 0 1 3 --method sqp ipopt
     python -m mpc_examples.rti_study --zones 50 --hours 2 --rti 0 2 --grid "6x1 5x6"
 
 For each prediction grid one :class:`~mpc_examples.economic_mpc.EconomicMPC` is built on the
 testbed's *true* model (build time reported once per grid) and run in closed loop
 (:func:`mpc_examples.simulator.run_mpc`: Kalman filter, 48 h of log replayed, the comfort
 band narrowed by the 0.35 K back-off) from ``--start-hour`` on a Monday, once per
-``--rti`` value: 0 converges IPOPT at every step, ``k > 0`` stops it after ``k``
-iterations from the shifted previous primal-dual solution (real-time iteration). The
+``--rti`` value: 0 converges IPOPT at every step, ``k > 0`` takes ``k`` iterations from the
+shifted previous primal-dual solution (real-time iteration), by ``--method``: ``sqp`` (the
+default: SQP steps, each a convex QP with a Gauss-Newton Hessian solved by PIQP) or
+``ipopt`` (IPOPT stopped after ``k`` iterations). The
 first solve of every run is cold and converged (no previous solution to shift), so it is
 reported apart from the steps after it.
 
@@ -91,6 +94,11 @@ def main(argv=None):
                    help="prediction grids in multiples of --step ('uniform': all 1)")
     p.add_argument("--rti", type=int, nargs="+", default=[0, 1, 2, 3],
                    help="IPOPT iterations per step after the first (0: converge)")
+    p.add_argument("--transcription", choices=["implicit", "euler"], default="implicit",
+                   help="the economic MPC's step rows: Radau (default) or implicit Euler")
+    p.add_argument("--method", nargs="+", choices=["sqp", "ipopt"], default=["sqp"],
+                   help="real-time iteration: SQP steps with a convex QP (PIQP; default) and/or "
+                        "IPOPT stopped after k iterations")
     p.add_argument("--shadow", action="store_true",
                    help="also converge every RTI step from the same state (first-input error)")
     p.add_argument("--warmup", type=float, default=48.0, help="hours of log the filter replays")
@@ -110,23 +118,26 @@ def main(argv=None):
     for spec in args.grid:
         steps = parse_grid(spec, args.step, args.horizon)
         N = n_uniform if steps is None else len(steps)
-        label = "uniform" if steps is None else _grid_label(steps, args.step)
+        label = ("uniform" if steps is None else _grid_label(steps, args.step)) + (
+            ", Euler" if args.transcription == "euler" else "")
         t0, c0 = time.perf_counter(), time.process_time()
         mpc = EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
-                          steps=steps)
+                          steps=steps, transcription=args.transcription)
         build = (time.perf_counter() - t0, time.process_time() - c0)
         ref = None
         if args.shadow and any(args.rti):
             ref = EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0,
-                              horizon=N, steps=steps)
+                              horizon=N, steps=steps, transcription=args.transcription)
         print(f"grid {label}: N={N}, {mpc.n_variables} variables, {mpc.n_nonzeros} nonzeros "
               f"(Jacobian + Hessian); build {build[0]:.1f} s wall, {build[1]:.1f} s CPU",
               flush=True)
-        for k in args.rti:
+        runs = [(k, m) for k in args.rti for m in (args.method if k else [None])]
+        for k, method in runs:
             mpc.reset()
             mpc.rti_iter = k or None
+            mpc.rti_method = method or mpc.rti_method
             ctrl = ShadowedMPC(mpc, ref) if (ref is not None and k) else mpc
-            name = f"{label}, {'converged' if not k else f'RTI {k} it'}"
+            name = f"{label}, {'converged' if not k else f'RTI {k} it {method}'}"
             res = run_mpc(scn, ctrl, model, name, warmup_hours=args.warmup)
             kp = kpis(res, scn.hvac, scn.band, scn.comfort_zones)
             w, c = np.asarray(res.solve_time), np.asarray(res.cpu_time)
@@ -152,7 +163,7 @@ def main(argv=None):
                 line += "; first input vs converged: " + row["first input vs converged"]
             print(line, flush=True)
             lines.append(line)
-        lines.insert(len(lines) - len(args.rti),
+        lines.insert(len(lines) - len(runs),
                      f"grid {label}: N={N}, {mpc.n_variables} variables, {mpc.n_nonzeros} "
                      f"nonzeros; build {build[0]:.1f} s wall, {build[1]:.1f} s CPU")
     load = os.getloadavg()

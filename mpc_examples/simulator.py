@@ -312,8 +312,10 @@ def run_example(kind: str, cls, argv=None):
     """
     parser = example_parser("Economic (nonlinear) MPC" if kind == "economic" else "Linear MPC (QP)")
     if kind == "economic":
-        parser.add_argument("--transcription", choices=["implicit", "explicit"], default="implicit",
-                            help="how the shooting gaps are written (same optimum)")
+        parser.add_argument("--transcription", choices=["implicit", "euler", "explicit"],
+                            default="implicit",
+                            help="the shooting gaps: Radau, sparse (implicit) or through its dense "
+                                 "solve (explicit), same optimum; or implicit Euler (one-hop rows)")
     else:
         parser.add_argument("--qp-solver", choices=["piqp", "osqp", "qpoases", "highs"],
                             default="piqp",

@@ -53,7 +53,7 @@ import scipy.sparse as sp
 
 from thermctl.model import zoh
 
-__all__ = ["LinearDynamics", "StepRows", "TRANSCRIPTIONS", "at_flow", "step_rows", "radau_row_scale",
+__all__ = ["LinearDynamics", "StepRows", "TRANSCRIPTIONS", "at_flow", "step_rows", "row_scale",
            "eliminate_fast_edges", "casadi_rhs", "network_cp"]
 
 log = logging.getLogger(__name__)
@@ -189,11 +189,13 @@ def step_rows(dyn: LinearDynamics, h: float, method: str = "radau") -> StepRows:
                     sp.csc_matrix(S @ M @ dyn.B_T), sp.csc_matrix(S @ M @ dyn.B_Q), method)
 
 
-def radau_row_scale(dyn: LinearDynamics, h: float) -> np.ndarray:
-    """``1 / max_j |L_ij|`` of the Radau rows over ``h`` [s]: the scaling :func:`step_rows`
+def row_scale(dyn: LinearDynamics, h: float, method: str = "radau") -> np.ndarray:
+    """``1 / max_j |L_ij|`` of the step rows over ``h`` [s] (``radau``: Padé rows ``L = I −
+    (2h/3) A + (h²/6) A²``; ``euler``: ``L = I − h A``): the scaling :func:`step_rows`
     applies, for the economic MPC's symbolic rows."""
     A = sp.csc_matrix(dyn.A)
-    L = sp.identity(A.shape[0], format="csc") - (2 * h / 3) * A + (h * h / 6) * (A @ A)
+    I = sp.identity(A.shape[0], format="csc")
+    L = I - h * A if method == "euler" else I - (2 * h / 3) * A + (h * h / 6) * (A @ A)
     return 1.0 / abs(L).max(axis=1).toarray().ravel()
 
 

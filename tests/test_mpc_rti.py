@@ -53,16 +53,11 @@ def test_shift_maps():
     np.testing.assert_array_equal(m["node"], [2, 2, 3, 4, 4])   # 0.5 + 1 falls inside [1, 2]
 
 
-def test_rti_converges_to_the_full_solve(scn):
-    """A real-time-iteration step at 06:30 (after converged solves at 06:00-06:20) from the
-    shifted solution, against IPOPT converged from the same warm start, on the 60-min-tail
-    grid. Measured (largest first supply temperature difference [K] / zone temperatures
-    after 10 min [K]): 1 iteration 3.33 / 0.14, 2: 2.43 / 0.10, 3: 0.052 / 0.0023, 5:
-    0.0020 / 7e-5; the RTI solver (barrier 1e-5) converges by itself in 6 iterations, to
-    6.9e-4 K of the warm solver's optimum (barrier 1e-3, 9 iterations: two paths to
-    IPOPT's tol 1e-6). The flows stay at the ventilation minimum (7e-6 kg/s apart). At
-    06:10 / 06:20 one iteration is 0.46 / 1.5 K off, three 0.17 / 0.064 K."""
-    nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
+@pytest.fixture(scope="module")
+def at_0630(scn):
+    """The 60-min-tail controller after converged state-feedback solves at 06:00-06:20, the
+    plant state and forecast at 06:30, and the controller's (converged) previous solution."""
+    nz = len(scn.tb.network.zones)
     mpc = EconomicMPC(scn.tb.model, scn.hvac, scn.comfort_zones, dt=600.0, horizon=len(GRID),
                       steps=GRID)
     plant = scn.plant()
@@ -74,13 +69,35 @@ def test_rti_converges_to_the_full_solve(scn):
         _apply(scn, plant, sol, meas)
     meas = plant.measure()
     fc = scn.forecast(30, mpc.N, 10, np.zeros(nz), meas.T_ahu, steps=GRID)
-    prev = copy.deepcopy(mpc._prev)
+    return mpc, plant.x.copy(), fc, meas, copy.deepcopy(mpc._prev)
+
+
+def _solve_from(at_0630, method, ks):
+    """Solve at 06:30 from the same previous solution, once per iteration count in ``ks``
+    (None: IPOPT converged from the warm start)."""
+    mpc, x, fc, _, prev = at_0630
     sols = {}
-    for k in (None, 1, 3, 10):
+    for k in ks:
         mpc._prev = copy.deepcopy(prev)
-        mpc.rti_iter = k
-        sols[k] = mpc.solve(plant.x, fc)
+        mpc.rti_iter, mpc.rti_method = k, method
+        sols[k] = mpc.solve(x, fc)
         assert sols[k].success
+    mpc.rti_iter, mpc.rti_method, mpc._prev = None, "sqp", copy.deepcopy(prev)
+    return sols
+
+
+def test_rti_converges_to_the_full_solve(scn, at_0630):
+    """IPOPT stopped after k iterations (``rti_method="ipopt"``) at 06:30 from the shifted
+    solution, against IPOPT converged from the same warm start, on the 60-min-tail
+    grid. Measured (largest first supply temperature difference [K] / zone temperatures
+    after 10 min [K]): 1 iteration 3.33 / 0.14, 2: 2.43 / 0.10, 3: 0.052 / 0.0023, 5:
+    0.0020 / 7e-5; the RTI solver (barrier 1e-5) converges by itself in 6 iterations, to
+    6.9e-4 K of the warm solver's optimum (barrier 1e-3, 9 iterations: two paths to
+    IPOPT's tol 1e-6). The flows stay at the ventilation minimum (7e-6 kg/s apart). At
+    06:10 / 06:20 one iteration is 0.46 / 1.5 K off, three 0.17 / 0.064 K."""
+    nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
+    meas = at_0630[3]
+    sols = _solve_from(at_0630, "ipopt", (None, 1, 3, 10))
     ref = sols[None]
     assert ref.status == "Solve_Succeeded"
     assert sols[1].iterations == 1 and sols[1].status == "User_Requested_Stop"
@@ -93,6 +110,29 @@ def test_rti_converges_to_the_full_solve(scn):
     assert gap[10][1] < 0.01 and gap[10][0] < 1e-5         # converged (6.9e-4 K, 6e-8 kg/s)
     np.testing.assert_allclose(sols[3].X[1, :nz], ref.X[1, :nz], atol=0.01)    # [°C] (0.0023)
     np.testing.assert_allclose(sols[10].X[1, :nz], ref.X[1, :nz], atol=1e-3)   # [°C] (2.3e-5)
+
+
+def test_sqp_rti_converges_to_the_full_solve(scn, at_0630):
+    """SQP real-time iteration (the default ``rti_method``: a convex QP per iteration,
+    Gauss-Newton Hessian, PIQP) at 06:30, against IPOPT converged from the same warm start.
+    Measured (first supply temperature [K] / zone temperatures after 10 min [K]): 1 SQP
+    step 0.083 / 2.9e-3 (IPOPT stopped after 1 iteration: 3.33 / 0.14), 2 steps 0.004 /
+    1.5e-4, 3 steps 0.001 / 4.0e-5; 10 steps stay there (0.001 / 3.9e-5): the SQP fixed
+    point is the NLP's KKT point, IPOPT's tol 1e-6 the rest. The cost equals the converged
+    one to 5e-5 of 19.30 kWh-equivalents after one step."""
+    nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
+    sols = _solve_from(at_0630, "sqp", (None, 1, 3, 10))
+    ref = sols[None]
+    assert ref.status == "Solve_Succeeded"
+    assert all(sols[k].status == "SQP_RTI" and sols[k].iterations == k for k in (1, 3, 10))
+    gap = {k: _first_input_gap(sols[k], ref, sup) for k in (1, 3, 10)}
+    ipopt_1 = _first_input_gap(_solve_from(at_0630, "ipopt", (1,))[1], ref, sup)
+    assert gap[1][1] < 0.2 and gap[1][1] < 0.1 * ipopt_1[1]   # [K] (0.083 vs 3.33)
+    assert gap[3][1] < 0.01 and gap[10][1] < 0.01              # [K] (0.001, 0.001)
+    assert max(gap[k][0] for k in (1, 3, 10)) < 1e-5          # [kg/s] (1.3e-7)
+    np.testing.assert_allclose(sols[1].X[1, :nz], ref.X[1, :nz], atol=0.01)    # [°C] (2.9e-3)
+    np.testing.assert_allclose(sols[10].X[1, :nz], ref.X[1, :nz], atol=5e-4)   # [°C] (3.9e-5)
+    assert abs(sols[1].cost - ref.cost) < 1e-3 * abs(ref.cost)
 
 
 @pytest.mark.slow
@@ -128,3 +168,30 @@ def test_coarse_tail_same_first_input(scn):
     assert worst[1, 1] < 1.0 and worst[2, 1] < 2.5         # [K] (0.65 / 1.66 measured)
     assert worst[1, 2] < 0.04 and worst[2, 2] < 0.1        # [K] (0.023 / 0.068 measured)
     assert worst[2, 1] > worst[1, 1]                       # the coarser tail is further off
+
+
+def test_euler_rows_are_the_linear_step(scn):
+    """The economic NMPC's implicit-Euler rows (``transcription="euler"``, symbolic and
+    bilinear in the flows) against the linear MPC's Euler step at the plan's own first flows
+    (:func:`mpc_examples.sparse.step_rows`, sparse matrices): the plan's state after 10 min
+    solves ``(I − hA) x⁺ = x + h(B_Ts T_s + B_T T_b + B_Q Q)`` to IPOPT's tolerance. The
+    first-order step moves the optimum a little: cost 19.574 against Radau's 19.600 at
+    06:20 (0.14 %, measured), and the first flows agree."""
+    from mpc_examples.sparse import at_flow, step_rows
+    nz, sup = len(scn.tb.network.zones), scn.hvac.supplied
+    plant = scn.plant()
+    meas = plant.measure()
+    sols = {}
+    for tr in ("euler", "implicit"):
+        mpc = EconomicMPC(scn.tb.model, scn.hvac, scn.comfort_zones, dt=600.0,
+                          horizon=len(GRID), steps=GRID, transcription=tr)
+        fc = scn.forecast(0, mpc.N, 10, np.zeros(nz), meas.T_ahu, steps=GRID)
+        sols[tr] = mpc.solve(plant.x, fc)
+        assert sols[tr].success
+    sol = sols["euler"]
+    rows = step_rows(at_flow(scn.tb.model, sol.ms[0]), 600.0, "euler")
+    rhs = (rows.N @ plant.x + rows.B_Ts @ sol.Ts[0] + rows.B_T @ fc.T_boundary[0]
+           + rows.B_Q @ fc.gains[0])
+    np.testing.assert_allclose(rows.L @ sol.X[1], rhs, atol=1e-6)     # [K] (scaled rows)
+    assert abs(sol.cost - sols["implicit"].cost) < 0.005 * abs(sols["implicit"].cost)
+    assert _first_input_gap(sol, sols["implicit"], sup)[0] < 1e-4     # [kg/s]
