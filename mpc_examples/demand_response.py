@@ -4,6 +4,7 @@ Run from the repository root::
 
     python -m mpc_examples.demand_response                  # 24 h, four internal models
     python -m mpc_examples.demand_response --model true,conduction-only --hours 12
+    python -m mpc_examples.demand_response --small-load 1200 --start-hour 5 --hours 15
 
 The energy/comfort task of the other examples barely separates the models (the gain
 filter absorbs a missing air path). This one makes the controller *plan through the
@@ -20,6 +21,8 @@ building's dynamics*:
 * **An undersized box**: office r240's box delivers 35 % of its design flow (its minimum
   stays). r240 has a true air path to r243 (2.8 m): when r240 overheats, over-cooling r243
   moves heat out of r240 through the air path — a model without that path cannot plan it.
+  In the testbed's February weather it only binds with extra heat in r240
+  (``--small-load``, e.g. 1200 W: docs/mpc.md).
 
 The controller is the linear MPC (:class:`~mpc_examples.linear_mpc.LinearMPC` with
 ``tariff=True``: cost instead of energy, a peak variable, the event's cap) with each

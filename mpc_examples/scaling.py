@@ -176,7 +176,8 @@ def _measure(kind, form, solver, scn, name, model, to_x, args, rti=None):
                         solver=solver, transcription=form.split()[0], steps=steps)
     else:
         mpc = EconomicMPC(model, scn.hvac, scn.comfort_zones, dt=args.step * 60.0, horizon=N,
-                          transcription=form.split()[0], steps=steps, rti_iter=rti or None)
+                          transcription=form.split()[0], steps=steps, rti_iter=rti or None,
+                          rti_method=solver.split()[0] if rti else "sqp")
     build = time.perf_counter() - t0
     n_solves = args.solves if nx <= 1000 else args.solves_large
     wall, cpu, fails = state_feedback_run(scn, mpc, to_x, n_solves)
@@ -223,8 +224,14 @@ def main(argv=None):
                         "'6x1 10x3' (an hour of 10-min steps, then 30-min steps to 6 h: 16 "
                         "instead of 36 steps); the control step stays --step")
     p.add_argument("--rti", type=int, nargs="+", default=[0],
-                   help="economic NMPC: IPOPT iterations per step after the first solve, one "
-                        "run per value (0: converge every step)")
+                   help="economic NMPC: real-time iterations per step after the first solve, "
+                        "one run per value (0: converge every step)")
+    p.add_argument("--rti-method", choices=["sqp", "ipopt"], default="sqp",
+                   help="economic NMPC's real-time iteration: SQP steps with a convex QP "
+                        "(PIQP) or IPOPT stopped after k iterations")
+    p.add_argument("--economic-forms", nargs="+", default=["implicit"],
+                   choices=["implicit", "euler", "explicit"],
+                   help="economic NMPC step rows (mpc_examples.economic_mpc.TRANSCRIPTIONS)")
     p.add_argument("--per-zone", type=int, nargs="*", default=[3],
                    help="states per zone of the structured reductions")
     p.add_argument("--max-dense-nnz", type=float, default=2e7,
@@ -252,11 +259,11 @@ def main(argv=None):
                             continue
                         jobs.append(("linear", form, solver))
             if "economic" in args.mpc and z <= args.economic_max_zones:
-                jobs += [("economic", "implicit", f"ipopt rti {k}" if k else "ipopt")
-                         for k in args.rti]
+                jobs += [("economic", form, f"{args.rti_method} rti {k}" if k else "ipopt")
+                         for form in args.economic_forms for k in args.rti]
             for kind, form, solver in jobs:
                 try:
-                    rti = int(solver.split()[-1]) if solver.startswith("ipopt rti") else None
+                    rti = int(solver.split()[-1]) if " rti " in solver else None
                     rows.append(_measure(kind, form, solver, scn, name, model, to_x, args, rti))
                 except MemoryError as exc:   # report, do not hide
                     rows.append(_row(kind, form, solver, z, name, model, note=f"failed: {exc!r}"))
