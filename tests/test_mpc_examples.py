@@ -618,3 +618,30 @@ def test_forecast_on_a_grid_averages_the_fine_one():
                                fine.T_boundary[6:].reshape(10, 3, -1).mean(axis=1))
     np.testing.assert_array_equal(coarse.lo[6:], fine.lo[8::3])
     np.testing.assert_array_equal(coarse.hvac_on[6:], fine.hvac_on[6::3])
+
+
+def test_small_load_makes_the_small_box_bind():
+    """``make_dr_scenario(small_load=W)`` adds W to r240's gains in occupied hours from the
+    control start only (the log before it is untouched), and with 1200 W the band-set-point
+    BAS, whose r240 box is at 35 %, leaves r240 too warm (08:00-12:00: 1.76 K·h measured;
+    0.006 K·h without the load)."""
+    from mpc_examples.demand_response import (SMALL_BOX_ZONE, dr_kpis, make_dr_scenario,
+                                              small_box_baseline)
+    from mpc_examples.simulator import run_baseline
+
+    out = {}
+    for load in (0.0, 1200.0):
+        scn = make_dr_scenario(0, 4.0, 6.0, None, 8.0, 0.35, small_load=load)
+        out[load] = scn
+    d0, d1 = out[0.0].tb.disturbances, out[1200.0].tb.disturbances
+    diff = d1.gains - d0.gains
+    j = list(d0.zones).index(SMALL_BOX_ZONE)
+    k0 = out[0.0].k0
+    on = np.asarray(d0.occupied, bool) & (np.arange(len(d0)) >= k0)
+    np.testing.assert_array_equal(diff[:, j], np.where(on, 1200.0, 0.0))
+    assert not np.any(np.delete(diff, j, axis=1))
+    assert on.sum() > 0 and not np.any(diff[:k0])
+    kp = {load: dr_kpis(run_baseline(scn, small_box_baseline(scn), "bas"), scn)
+          for load, scn in out.items()}
+    key = f"{SMALL_BOX_ZONE} discomfort [K·h]"
+    assert kp[0.0][key] < 0.05 and kp[1200.0][key] > 1.0
