@@ -111,3 +111,23 @@ def test_block_nll_adds_up_to_the_likelihood():
     assert b.sum() == pytest.approx(est.problem_.nll(est.eta_), rel=1e-10)
     ids6, b6 = est.problem_.block_nll(est.eta_, block=6 * 3600.0)
     assert len(ids6) > 12 and b6.sum() == pytest.approx(b.sum(), rel=1e-10)
+
+
+class _FirstFails(_Stub):
+    """B screens best (-120) but its gain is not consistent; A (-100) is."""
+
+    VALUE = {(): 0.0, ("A",): -100.0, ("B",): -120.0, ("A", "B"): -170.0}
+
+
+def test_forward_stops_at_an_inconsistent_best_candidate_and_says_why():
+    """The forward search stops there (going on with the next best was measured to add more
+    false air paths than true ones at building scale: thermctl.structure.search), and the
+    rejected edge's reason says what it gained and why it is out, where it used to give only
+    its screening value."""
+    res = search_edges(_cands(), _FirstFails(), direction="forward", margin=10.0)
+    assert res.edges == []
+    assert [(s.action, s.edge) for s in res.path[1:]] == [("reject", "air:B-z"), ("stop", None)]
+    b = [k for k in res.reasons if k.startswith("air:B")][0]
+    assert res.reasons[b].startswith("out: bic -120.0 when added, but its gain is not consistent")
+    a = [k for k in res.reasons if k.startswith("air:A")][0]
+    assert res.reasons[a].startswith("out: last screening bic change -100.0")

@@ -475,9 +475,9 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
                                fit_rows=fit_rows, **options)
     evidence = {}
     for st in sel.path:
-        if st.action in ("add", "stop"):
+        if st.action in ("add", "stop", "reject"):
             evidence.update({k: float(v) for k, v in st.screened.items()})
-        if st.action == "add":
+        if st.action in ("add", "reject"):
             evidence[st.edge] = float(st.delta)
         if st.action == "remove":
             evidence[st.edge] = -float(st.delta)     # what removing it cost, negated
