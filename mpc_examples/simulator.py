@@ -333,7 +333,7 @@ def run_example(kind: str, cls, argv=None):
     kinds = [m.strip() for m in args.model.split(",") if m.strip()]
     print(f"{scn.tb.spec.name}: {len(scn.tb.network.zones)} zones, "
           f"{scn.tb.network.n_states} states; control from {scn.start:%a %Y-%m-%d %H:%M} "
-          f"for {args.hours:g} h; MPC step {args.step:g} min, horizon {args.horizon:g} h ({N} steps on a uniform grid)")
+          f"for {args.hours:g} h; MPC step {args.step:g} min, horizon {args.horizon:g} h")
     results = [run_baseline(scn)]
     if not args.no_band_baseline:
         results.append(run_baseline(scn, band_baseline(scn), "baseline (band set points)"))
