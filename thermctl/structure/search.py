@@ -231,7 +231,6 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         if note:
             lost[name] = note
 
-    rejected = {}           # edge name -> why its gain did not hold
     if direction in ("forward", "both"):
         while max_edges is None or len(cur) < max_edges:
             rest = [c for c in cands if c not in cur]
@@ -249,8 +248,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 # the next best of the same screening was measured on the corridor floors
                 # (local problems, min_t 2): 25 zones the same paths, 49 zones +1 true and +2
                 # false, 196 zones +2 true and +9 false: it buys recall with more false paths
-                rejected[pick] = (f"out: {crit} {d:+.1f} when added, but its gain is not "
-                                  f"consistent: {why}")
+                reasons[pick] = (f"out: {crit} {d:+.1f} when added, but its gain is not "
+                                 f"consistent: {why}")
                 path.append(SelectionStep("reject", pick, val, d, [x.name for x in cur], screened,
                                           note=f"gain not consistent: {why}"))
                 path.append(SelectionStep("stop", None, val, 0.0, [x.name for x in cur],
@@ -318,8 +317,6 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                                       f"{t[0]:+.1f}" + (f", {said[k]}" if said.get(k) else ""))
                 break
     for c in cands:
-        if c.name not in reasons and c.name in rejected and c not in cur:
-            reasons[c.name] = rejected[c.name]
         if c.name not in reasons:
             if c in cur:
                 reasons[c.name] = "in (start)"
