@@ -13,8 +13,9 @@ from thermctl.data import read_measurements
 from thermctl.errors import EstimationError
 from thermctl.estimate.likelihood import LikelihoodOptions, LikelihoodProblem
 from thermctl.estimate import as_estimation_data
-from thermctl.local import (LocalProblem, LocalResult, combine, fit_local, local_problems,
-                            run_local)
+from thermctl.local import (LocalProblem, LocalResult, combine, confirm_local, fit_local,
+                            local_problems, one_sided, run_local)
+from thermctl.network import air_path_name
 from thermctl.network import ThermalNetwork
 from thermctl.testbed import generate
 
@@ -321,3 +322,35 @@ def test_sin_picks_take_the_threshold_and_the_best_partner(monkeypatch):
     monkeypatch.setattr(nb, "neighbourhood_scores",
                         lambda frame, z, order, **kw: {"B": 0.05, "C": 0.1, "D": 0.0})
     assert _sin_picks(p, None, 0.05, 0.25)[1] == {"air:A-C"}     # the best partner only
+
+
+def test_confirm_tests_a_one_sided_path_at_the_other_end(corridor):
+    """A path kept at one end only is fitted at the other end, added alone to what that end
+    kept: the true open door passes there (BIC −79, R̄_v within 5 % of the truth), a false
+    neighbour pair fails (BIC −4, t 0.9), and the ``both`` rule follows the tests."""
+    spec, meas, tb = corridor
+    probs = local_problems(spec, meas.frame.columns)
+    by = {p.zone: i for i, p in enumerate(probs)}
+    (a, b, _), = tb.truth.edges
+    true = air_path_name(a, b)
+    false = next((x, y, d) for x, y, d in probs[by[a]].candidates
+                 if air_path_name(x, y) != true and x in by and y in by)
+    res = [LocalResult(p.zone, [], {}, {}, float("nan"), p.n_states) for p in probs]
+    # as if a's search had kept both and every other search had stopped before them
+    res[by[a]] = LocalResult(a, [true, air_path_name(false[0], false[1])], {}, {}, 1.0, 10)
+    other = false[1] if false[0] == a else false[0]
+    todo = one_sided(probs, res)
+    assert {probs[i].zone: [air_path_name(x, y) for x, y, _ in v] for i, v in todo.items()} \
+        == {b: [true], other: [air_path_name(false[0], false[1])]}
+    res = confirm_local(probs, res, meas.frame, workers=1, margin=10.0, min_t=2.0,
+                        fit_rows="all", max_iter=100)
+    ok, delta, t, note, rb = res[by[b]].confirmed[true]
+    assert ok and delta < -50 and t > 2.0 and "daily gain t" in note
+    assert rb == pytest.approx(tb.truth.rbar_v, rel=0.05)
+    ok_f, delta_f, t_f, _, _ = res[by[other]].confirmed[air_path_name(false[0], false[1])]
+    assert not ok_f and delta_f > -10 and t_f < 2.0
+    assert not one_sided(probs, res)           # nothing left to test
+    verdict = {v.name: v for v in combine(probs, res, "both")}
+    assert verdict[true].kept and "when tested alone" in verdict[true].reason
+    assert verdict[true].rbar_v == pytest.approx(rb)      # the only end with a fitted R̄_v
+    assert not verdict[air_path_name(false[0], false[1])].kept

@@ -394,6 +394,9 @@ class LocalResult:
         Wall class → fitted UA factor of the local model [-], classes as in the whole
         building (:attr:`LocalProblem.wall_classes`); empty without ``wall_factors`` and
         for a problem with no candidate (no fit).
+    confirmed : dict
+        Edge name → ``(ok, delta, t, note, rbar_v)`` of an air path another problem kept
+        and this one's search did not, tested here directly (:func:`confirm_local`).
     """
 
     zone: str
@@ -409,6 +412,7 @@ class LocalResult:
     reasons: dict = field(default_factory=dict)
     error: str | None = None
     ua_factor: dict = field(default_factory=dict)
+    confirmed: dict = field(default_factory=dict)
 
 
 def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: float = 10.0,
@@ -716,28 +720,127 @@ def run_local(problems, frame, *, workers: int | None = None, client=None, progr
     say("local problems", 0, n)
     # largest problems first: the last task to start is a short one
     order = sorted(range(n), key=lambda i: -problems[i].n_states)
-    if client is not None:
-        own = False
-        if isinstance(client, str):
-            from distributed import Client
-            client, own = Client(client), True
-        try:
-            from distributed import as_completed
-            # a key names a result on the cluster: unique per call, or a second run on the
-            # same client would be handed the first run's results
-            run = uuid.uuid4().hex[:8]
-            futs = {client.submit(_fit_task, problems[i], problems[i].data(frames[i]), kwargs,
-                                  pure=False, key=f"thermctl-local-{run}-{i}"): i
-                    for i in order}
-            for fut in as_completed(list(futs)):
-                done(futs[fut], fut.result())
-        finally:
-            if own:
-                client.close()
-    else:
-        run_tasks(_fit_task, [(p, p.data(f), kwargs) for p, f in zip(problems, frames)],
-                  workers=workers, order=order, on_done=done)
+    tasks = [(p, p.data(f), kwargs) for p, f in zip(problems, frames)]
+    _dispatch(_fit_task, tasks, order, workers, client, done, "local")
     return [results[i] for i in range(n)]
+
+
+def _dispatch(fn, tasks, order, workers, client, done, tag):
+    """``fn(*task)`` for every task on local processes (:func:`run_tasks`) or on a Dask
+    cluster (``client``: a Client or a scheduler address); ``done(i, result)`` as each
+    finishes."""
+    if client is None:
+        run_tasks(fn, tasks, workers=workers, order=order, on_done=done)
+        return
+    own = False
+    if isinstance(client, str):
+        from distributed import Client
+        client, own = Client(client), True
+    try:
+        from distributed import as_completed
+        # a key names a result on the cluster: unique per call, or a second run on the
+        # same client would be handed the first run's results
+        run = uuid.uuid4().hex[:8]
+        futs = {client.submit(fn, *tasks[i], pure=False, key=f"thermctl-{tag}-{run}-{i}"): i
+                for i in order}
+        for fut in as_completed(list(futs)):
+            done(futs[fut], fut.result())
+    finally:
+        if own:
+            client.close()
+
+
+def one_sided(problems, results) -> dict:
+    """Air paths kept by some local problems and not by others that see them.
+
+    Returns
+    -------
+    dict
+        Index of a problem that did not keep the path (and did not fail) → list of such
+        ``(a, b, d)``.
+    """
+    kept = {nm for r in results if r.error is None for nm in r.edges}
+    out: dict[int, list] = {}
+    for i, (p, r) in enumerate(zip(problems, results)):
+        if r.error is not None:
+            continue
+        for a, b, d in p.candidates:
+            nm = air_path_name(a, b)
+            if nm in kept and nm not in r.edges and nm not in r.confirmed:
+                out.setdefault(i, []).append((a, b, d))
+    return out
+
+
+def _confirm_task(problem, sub, kept, tests, kwargs):
+    """A task: test ``tests`` against ``kept`` in one local problem (errors returned)."""
+    from ._blas import single_thread_blas
+    from .selection import judge_air_paths
+    kw = dict(kwargs)
+    try:
+        with single_thread_blas(), warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return judge_air_paths(problem.spec, sub, kept, tests, **kw)
+    except Exception as exc:            # noqa: BLE001 - one zone's failure must not stop the rest
+        log.warning("confirming %s in the local problem of %s failed: %s",
+                    ", ".join(air_path_name(a, b) for a, b, _ in tests), problem.zone, exc)
+        return {}
+
+
+def confirm_local(problems, results, frame, *, workers: int | None = None, client=None,
+                  progress=None, **kwargs) -> list[LocalResult]:
+    """Test, at every end that did not keep it, an air path another end kept.
+
+    A local search is greedy: it stops at the first candidate that fails the margin or the
+    day-by-day test, so a path its neighbour keeps strongly may never have been fitted
+    there. Each such path is added alone to the problem's own kept structure and judged
+    as the search would have judged it (:func:`thermctl.selection.judge_air_paths`); the
+    verdicts go to :attr:`LocalResult.confirmed`, and :func:`combine` counts a passed test
+    as that end's vote.
+
+    Parameters
+    ----------
+    problems : list of LocalProblem
+    results : list of LocalResult
+        Of :func:`run_local`, same order; updated in place and returned.
+    frame : pandas.DataFrame or list of DataFrame
+    workers, client, progress
+        As :func:`run_local`.
+    **kwargs
+        :func:`fit_local`'s keywords (``criterion``, ``margin``, ``min_t``, ``solar``...).
+
+    Returns
+    -------
+    list of LocalResult
+    """
+    n = len(problems)
+    frames = list(frame) if isinstance(frame, (list, tuple)) else [frame] * n
+    todo = one_sided(problems, results)
+    if not todo:
+        return results
+    idx = sorted(todo)
+    say = progress or (lambda *a: None)
+    cands = [{air_path_name(a, b): (a, b, d) for a, b, d in problems[i].candidates} for i in idx]
+    tasks = [(problems[i], problems[i].data(frames[i]),
+              [c[nm] for nm in results[i].edges], todo[i], kwargs) for i, c in zip(idx, cands)]
+    got = {}
+    t0 = time.perf_counter()
+
+    def done(k, res):
+        got[k] = res
+        i = idx[k]
+        log.info("confirm %d/%d: %s tested %s: %s in %.0f s", len(got), len(idx), problems[i].zone,
+                 ", ".join(air_path_name(a, b) for a, b, _ in todo[i]),
+                 ", ".join(f"{nm} {'in' if v[0] else 'out'}" for nm, v in res.items()) or "failed",
+                 time.perf_counter() - t0)
+        say("confirming one-sided air paths", len(got), len(idx))
+
+    say("confirming one-sided air paths", 0, len(idx))
+    order = sorted(range(len(idx)), key=lambda k: -problems[idx[k]].n_states)
+    _dispatch(_confirm_task, tasks, order, workers, client, done, "confirm")
+    for k, i in enumerate(idx):
+        results[i].confirmed.update(got.get(k, {}))
+    return results
 
 
 # ---------------------------------------------------------------------------- combine
@@ -808,6 +911,13 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
             e["kept"][p.zone] = nm in r.edges
             if nm in r.rbar_v and nm in r.edges:
                 e["rb"][p.zone] = float(r.rbar_v[nm])
+            elif nm in r.confirmed:
+                ok, delta, t, note, rb = r.confirmed[nm]
+                e["ev"][p.zone] = float(delta)
+                e["kept"][p.zone] = bool(ok)
+                e.setdefault("tested", {})[p.zone] = note
+                if ok and np.isfinite(rb):
+                    e["rb"][p.zone] = float(rb)
     out = []
     for nm in sorted(seen):
         e = seen[nm]
@@ -825,7 +935,9 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
             kept = bool(ev) and sum(ev) < -margin
         rbs = list(e["rb"].values())
         rb = float(np.exp(np.mean(np.log(rbs)))) if kept and rbs else float("nan")
+        tested = e.get("tested", {})
         desc = ", ".join(f"{z}: {'kept' if votes[z] else 'out'} ({e['ev'][z]:+.1f})"
+                         + (f" when tested alone ({tested[z]})" if z in tested else "")
                          for z in votes)
         reason = f"{'in' if kept else 'out'} by rule {rule!r}: {desc}"
         if kept and not rbs:

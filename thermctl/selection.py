@@ -22,7 +22,7 @@ from .estimate.likelihood.scoring import CRITERIA, LikelihoodScorer
 from .network import ThermalNetwork
 from .structure.search import _cand, as_candidates, search_edges
 
-__all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "CRITERIA"]
+__all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "judge_air_paths", "CRITERIA"]
 
 
 @dataclass
@@ -196,3 +196,53 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         scorer.n_fits += 1
     return SelectionResult([x.pair + (x.d,) for x in cur], cands, res.path, res.reasons,
                            criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits)
+
+
+def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: float = 10.0,
+                   min_t: float = 0.0, max_iter: int = 200, **estimator_kwargs) -> dict:
+    """Test air paths one at a time against a fixed structure.
+
+    ``kept`` is fitted once; each of ``tests`` is added to it alone and fitted (warm
+    started), and its verdict is what the forward search would have said had it reached
+    it: in when the criterion improves by more than ``margin`` and the gain holds day by
+    day (``min_t``, :meth:`LikelihoodScorer.consistent`).
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+    data : EstimationData, Measurements or DataFrame
+    kept : sequence of (a, b[, d])
+        The structure every test is added to.
+    tests : sequence of (a, b[, d])
+    criterion : {"bic", "aic", "holdout"}
+    margin : float
+        [-]
+    min_t : float
+        [-]; 0: reported, not required.
+    max_iter : int
+        Per fit.
+    **estimator_kwargs
+        Passed to every :class:`LikelihoodEstimator`.
+
+    Returns
+    -------
+    dict
+        Edge name → ``(ok, delta, t, note, rbar_v)``: the verdict, the criterion change of
+        adding it [-], the daily-gain t [-], a few words, its fitted R̄_v [K/(W m)].
+    """
+    scorer = LikelihoodScorer(spec, data, criterion, max_iter=max_iter, min_t=min_t,
+                              **estimator_kwargs)
+    cur = as_candidates(spec, list(kept)) if kept else []
+    base, val = scorer.fit(cur)
+    out = {}
+    for e in tests:
+        c = _cand(spec, e)
+        big, v = scorer.fit(cur + [c], warm=base)
+        d = v - val
+        ok, t, why = scorer.consistent(base, big)
+        rb = float(big.params_.get(ConvectionParameters.key(c.name), np.nan))
+        verdict = bool(d < -margin and ok)
+        note = (f"{criterion} {d:+.1f} when added to the {len(cur)} kept here"
+                + (f", {why}" if why else ""))
+        out[c.name] = (verdict, float(d), float(t), note, rb)
+    return out
