@@ -354,3 +354,22 @@ def test_confirm_tests_a_one_sided_path_at_the_other_end(corridor):
     assert verdict[true].kept and "when tested alone" in verdict[true].reason
     assert verdict[true].rbar_v == pytest.approx(rb)      # the only end with a fitted R̄_v
     assert not verdict[air_path_name(false[0], false[1])].kept
+
+
+def test_one_sided_matches_paths_within_a_group_only(small_spec):
+    """Two buildings (or resamples) with the same zone names in one run: a path kept in
+    one is not tested in the other."""
+    probs = local_problems(small_spec)
+    kept = {"r1": ["air:r1-r3"]}
+    res = [_fake(p.zone, kept.get(p.zone, []), {}) for p in probs]
+    one = one_sided(probs, res)
+    assert {probs[i].zone: [air_path_name(a, b) for a, b, _ in v] for i, v in one.items()} \
+        == {"r3": ["air:r1-r3"]}
+    # the same problems again as a second group where nobody kept it
+    two = one_sided(probs * 2, res + [_fake(p.zone, [], {}) for p in probs],
+                    groups=[0] * len(probs) + [1] * len(probs))
+    assert {i: [air_path_name(a, b) for a, b, _ in v] for i, v in two.items()} \
+        == {i: [air_path_name(a, b) for a, b, _ in v] for i, v in one.items()}
+    # a failed problem is not asked, and a path already tested there is not asked again
+    res[[p.zone for p in probs].index("r3")].confirmed["air:r1-r3"] = (False, 5.0, 0.1, "", 0.0)
+    assert one_sided(probs, res) == {}

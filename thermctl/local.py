@@ -750,8 +750,16 @@ def _dispatch(fn, tasks, order, workers, client, done, tag):
             client.close()
 
 
-def one_sided(problems, results) -> dict:
+def one_sided(problems, results, groups=None) -> dict:
     """Air paths kept by some local problems and not by others that see them.
+
+    Parameters
+    ----------
+    problems : list of LocalProblem
+    results : list of LocalResult
+    groups : list, optional
+        A label per problem (its building, or its resample): paths are matched within a
+        group only. Default: one group.
 
     Returns
     -------
@@ -759,14 +767,15 @@ def one_sided(problems, results) -> dict:
         Index of a problem that did not keep the path (and did not fail) → list of such
         ``(a, b, d)``.
     """
-    kept = {nm for r in results if r.error is None for nm in r.edges}
+    groups = [0] * len(problems) if groups is None else list(groups)
+    kept = {(g, nm) for g, r in zip(groups, results) if r.error is None for nm in r.edges}
     out: dict[int, list] = {}
     for i, (p, r) in enumerate(zip(problems, results)):
         if r.error is not None:
             continue
         for a, b, d in p.candidates:
             nm = air_path_name(a, b)
-            if nm in kept and nm not in r.edges and nm not in r.confirmed:
+            if (groups[i], nm) in kept and nm not in r.edges and nm not in r.confirmed:
                 out.setdefault(i, []).append((a, b, d))
     return out
 
@@ -775,20 +784,21 @@ def _confirm_task(problem, sub, kept, tests, kwargs):
     """A task: test ``tests`` against ``kept`` in one local problem (errors returned)."""
     from ._blas import single_thread_blas
     from .selection import judge_air_paths
-    kw = dict(kwargs)
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         with single_thread_blas(), warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
             warnings.simplefilter("ignore", ConvergenceWarning)
-            return judge_air_paths(problem.spec, sub, kept, tests, **kw)
+            got = judge_air_paths(problem.spec, sub, kept, tests, **kwargs)
     except Exception as exc:            # noqa: BLE001 - one zone's failure must not stop the rest
         log.warning("confirming %s in the local problem of %s failed: %s",
                     ", ".join(air_path_name(a, b) for a, b, _ in tests), problem.zone, exc)
-        return {}
+        got = {}
+    return got, time.perf_counter() - t0, time.process_time() - c0
 
 
 def confirm_local(problems, results, frame, *, workers: int | None = None, client=None,
-                  progress=None, **kwargs) -> list[LocalResult]:
+                  progress=None, groups=None, **kwargs) -> list[LocalResult]:
     """Test, at every end that did not keep it, an air path another end kept.
 
     A local search is greedy: it stops at the first candidate that fails the margin or the
@@ -806,6 +816,8 @@ def confirm_local(problems, results, frame, *, workers: int | None = None, clien
     frame : pandas.DataFrame or list of DataFrame
     workers, client, progress
         As :func:`run_local`.
+    groups : list, optional
+        A label per problem: several buildings (or resamples) in one run (:func:`one_sided`).
     **kwargs
         :func:`fit_local`'s keywords (``criterion``, ``margin``, ``min_t``, ``solar``...).
 
@@ -815,7 +827,7 @@ def confirm_local(problems, results, frame, *, workers: int | None = None, clien
     """
     n = len(problems)
     frames = list(frame) if isinstance(frame, (list, tuple)) else [frame] * n
-    todo = one_sided(problems, results)
+    todo = one_sided(problems, results, groups)
     if not todo:
         return results
     idx = sorted(todo)
@@ -826,9 +838,9 @@ def confirm_local(problems, results, frame, *, workers: int | None = None, clien
     got = {}
     t0 = time.perf_counter()
 
-    def done(k, res):
-        got[k] = res
-        i = idx[k]
+    def done(k, out):
+        got[k] = out
+        i, res = idx[k], out[0]
         log.info("confirm %d/%d: %s tested %s: %s in %.0f s", len(got), len(idx), problems[i].zone,
                  ", ".join(air_path_name(a, b) for a, b, _ in todo[i]),
                  ", ".join(f"{nm} {'in' if v[0] else 'out'}" for nm, v in res.items()) or "failed",
@@ -839,7 +851,12 @@ def confirm_local(problems, results, frame, *, workers: int | None = None, clien
     order = sorted(range(len(idx)), key=lambda k: -problems[idx[k]].n_states)
     _dispatch(_confirm_task, tasks, order, workers, client, done, "confirm")
     for k, i in enumerate(idx):
-        results[i].confirmed.update(got.get(k, {}))
+        res, wall, cpu = got[k]
+        r = results[i]
+        r.confirmed.update(res)
+        r.time += wall              # the problem's cost includes its tests
+        r.cpu += cpu
+        r.n_fits += 1 + len(todo[i])
     return results
 
 
@@ -1037,7 +1054,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                    client=None, progress=None, parallel: bool = True,
                    fit_rows: str = "all", latent_depth: int | None = 1,
                    candidates: str = "all", level: float = 0.05,
-                   s_min: float = 0.25, min_t: float = 0.0,
+                   s_min: float = 0.25, min_t: float = 0.0, confirm: bool = False,
                    **options) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
@@ -1071,6 +1088,9 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     min_t : float
         Daily consistency an air path's gain must show in its local search
         (:meth:`thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`); 0: off.
+    confirm : bool
+        With ``rule="both"``: test every air path kept at one end only at its other end
+        (:func:`confirm_local`).
     **options
         Other :class:`thermctl.estimate.likelihood.LikelihoodOptions` fields of the local
         fits (``internal_mass``...).
@@ -1092,6 +1112,10 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     results = run_local(problems, frame, workers=workers, client=client, progress=progress,
                         criterion=criterion, margin=margin, solar=solar, fit_rows=fit_rows,
                         min_t=min_t, **options)
+    if confirm and rule == "both":
+        results = confirm_local(problems, results, frame, workers=workers, client=client,
+                                progress=progress, criterion=criterion, margin=margin,
+                                solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
     return assemble(problems, results, rule, margin, time.perf_counter() - t0)
 
 

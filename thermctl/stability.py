@@ -312,7 +312,7 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
 def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0.5,
                     block_days: int = 2, seed: int = 0, rule: str = "both",
                     margin: float = 10.0, workers: int | None = None, client=None,
-                    progress=None, **fit_kwargs) -> StabilityResult:
+                    progress=None, confirm: bool = False, **fit_kwargs) -> StabilityResult:
     """Selection frequency of every candidate air path of the local problems.
 
     Every resample runs every local problem (:func:`thermctl.local.run_local`: the
@@ -332,6 +332,9 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
         [-]
     workers, client, progress
         As :func:`thermctl.local.run_local`.
+    confirm : bool
+        With ``rule="both"``, one-sided paths are tested at their other end on each
+        resample (:func:`thermctl.local.confirm_local`), as on the full data.
     **fit_kwargs
         Passed to :func:`thermctl.local.fit_local`.
 
@@ -340,7 +343,7 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
     StabilityResult
         ``cpu`` sums the local tasks' CPU time.
     """
-    from .local import combine, run_local
+    from .local import combine, confirm_local, run_local
     from .network import air_path_name
 
     t0 = time.perf_counter()
@@ -350,6 +353,12 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
     results = run_local(list(problems) * len(days), [f for f in frames for _ in range(n)],
                         workers=workers, client=client, progress=progress,
                         margin=margin, **fit_kwargs)
+    if confirm and rule == "both":
+        results = confirm_local(list(problems) * len(days), results,
+                                [f for f in frames for _ in range(n)], workers=workers,
+                                client=client, progress=progress,
+                                groups=[b for b in range(len(days)) for _ in range(n)],
+                                margin=margin, **fit_kwargs)
     out = []
     names = {air_path_name(a, b) for p in problems for a, b, _ in p.candidates}
     for b, ks in enumerate(days):

@@ -164,6 +164,10 @@ def identify(
                                       "daily-gain t statistic an air path must reach (a "
                                       "neighbour sharing the zone's disturbances passes BIC "
                                       "but not day after day); 0: off."),
+    local_confirm: bool = typer.Option(_D.split.confirm, "--local-confirm/--no-local-confirm",
+                                       help="Local problems, --combine both: test an air path "
+                                       "kept at one end only at its other end (a greedy search "
+                                       "may stop before reaching it)."),
     columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
                                  "column), e.g. from `thermctl spec from-brick`."),
 ):
@@ -205,7 +209,8 @@ def identify(
                                      internal_mass=internal_mass, wall_factors=wall_factors),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
-                           latent_depth=latent_depth, min_t=local_min_t),
+                           latent_depth=latent_depth, min_t=local_min_t,
+                           confirm=local_confirm),
         calibration=_window(calibration, "--calibration"),
         validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:
