@@ -70,6 +70,21 @@ class LikelihoodOptions:
         Sensor error model: white, or white plus a first-order autoregressive error per
         measured zone (``σ_e``, ``τ_e``) — what quantisation of a slowly moving
         temperature looks like (a 0.1 °F step is crossed only every few samples).
+    innovations : {"gaussian", "student"}
+        Distribution of the one-step innovations in the likelihood. ``student``: a
+        multivariate t with ``nu`` degrees of freedom and the filter's innovation
+        covariance S as its scale matrix, ``½[(ν + p)·log(1 + eᵀS⁻¹e/ν) + log det S]`` per
+        sample plus constants (p measured zones). The filter itself stays the linear
+        Kalman filter, so this is a robust M-estimator on its innovations: a sample with a
+        large innovation (an occupancy gain that jumps, which the random-walk gain model
+        cannot follow) counts logarithmically instead of quadratically. ν → ∞ gives the
+        Gaussian likelihood.
+    nu : float or "fit"
+        Degrees of freedom of ``innovations="student"`` [-] (> 2), or ``"fit"``: estimated
+        with the other parameters within ``nu_bounds`` (the data say how heavy their tails
+        are; at the upper bound the t is nearly Gaussian).
+    nu_bounds : (float, float)
+        Bounds of a fitted ``nu`` [-].
     boundary_noise : None, "outdoor", "all" or list of str
         A first-order autoregressive error (``σ_b``, ``τ_b``, shared) on these boundary
         temperatures: what the walls see differs from the logged value (a station away
@@ -153,6 +168,9 @@ class LikelihoodOptions:
     sda_iterations: int = 30
     riccati: str = "implicit"
     measurement: str = "white"
+    innovations: str = "gaussian"
+    nu: object = "fit"
+    nu_bounds: tuple = (2.5, 200.0)
     boundary_noise: object = None
     fit_rows: object = "auto"
     holdoff: float = 3 * 3600.0
@@ -166,6 +184,15 @@ class LikelihoodOptions:
             raise EstimationError(f"riccati must be 'implicit' or 'doubling', found {self.riccati!r}")
         if self.measurement not in ("white", "ar1"):
             raise EstimationError(f"measurement must be 'white' or 'ar1', found {self.measurement!r}")
+        if self.innovations not in ("gaussian", "student"):
+            raise EstimationError(f"innovations must be 'gaussian' or 'student', found "
+                                  f"{self.innovations!r}")
+        if self.nu != "fit" and not (isinstance(self.nu, (int, float)) and self.nu > 2.0):
+            raise EstimationError(f"nu (degrees of freedom of the t innovations) must be > 2 "
+                                  f"or 'fit', found {self.nu!r}")
+        lo, hi = self.nu_bounds
+        if not 2.0 < lo < hi:
+            raise EstimationError(f"nu_bounds: need 2 < lower < upper [-], found {lo}, {hi}")
         if self.disturbance not in ("random_walk", "none"):
             raise EstimationError(f"disturbance must be 'random_walk' or 'none', found "
                                   f"{self.disturbance!r}")

@@ -29,6 +29,7 @@ GROUP_UNITS = {
     "gain": "W",
     "cap_factor": "-",
     "ua_factor": "-",
+    "nu": "-",
 }
 """Unit of each parameter group."""
 
