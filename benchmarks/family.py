@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from thermctl.data import read_measurements
-from thermctl.identify import IdentifyOptions, identify
+from thermctl.identify import EstimationOptions, IdentifyOptions, identify
 from thermctl.model import ThermalModel
 from thermctl.testbed import disturbances, generate
 from thermctl.validate import minimum_flows, relative_error, step_response_matrix
@@ -86,8 +86,8 @@ LAYOUTS = {
 }
 
 
-def run_case(study, name, kwargs, seed, days):
-    """Generate, identify with the defaults, score; one dict."""
+def run_case(study, name, kwargs, seed, days, innovations="gaussian"):
+    """Generate, identify with the defaults (or ``innovations``), score; one dict."""
     t0 = time.perf_counter()
     gen_kw = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     weekend = disturbances.HOURLY_WEEKEND
@@ -109,11 +109,14 @@ def run_case(study, name, kwargs, seed, days):
     row = dict(study=study, case=name, seed=seed, days=days, kwargs=kwargs,
                building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
+    if innovations != "gaussian":
+        row["innovations"] = innovations
     t1 = time.perf_counter()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            ident = identify(meas)
+            ident = identify(meas, IdentifyOptions(
+                estimation=EstimationOptions(innovations=innovations)))
     except Exception as exc:            # noqa: BLE001 - a failing run is a result
         row["error"] = f"{type(exc).__name__}: {str(exc)[:120]}"
         return row
@@ -195,6 +198,8 @@ def main(argv=None):
     ap.add_argument("--save", action="store_true", help=f"append rows to {RUNS}")
     ap.add_argument("--table", action="store_true", help=f"print the tables of {RUNS}")
     ap.add_argument("--quick", action="store_true", help="one small building, 6 days")
+    ap.add_argument("--innovations", choices=["gaussian", "student"], default="gaussian",
+                    help="identify's innovation distribution (student: case names get ' [t]')")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
@@ -217,7 +222,9 @@ def main(argv=None):
                 if not args.cases or n in args.cases]
     rows = []
     for study, name, kw, seed, days in jobs:
-        row = run_case(study, name, kw, seed, days)
+        if args.innovations != "gaussian":
+            name += " [t]"
+        row = run_case(study, name, kw, seed, days, innovations=args.innovations)
         rows.append(row)
         print(json.dumps(row), flush=True)
         if args.save:

@@ -181,6 +181,12 @@ class EstimationOptions:
         boundary) for walls of uncertain construction; in whole-building fits only (a
         local problem sees its neighbours' partitions as boundary walls). Measured biased
         on the testbed (docs/identification.md, "Wall classes").
+    innovations : {"gaussian", "student"}
+        Kalman criteria: the distribution of the one-step innovations
+        (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`); ``student`` fits a
+        multivariate t whose degrees of freedom the data set: occupancy gains that jump
+        count logarithmically instead of quadratically (docs/identification.md, "Gains that
+        jump: t innovations").
     """
 
     criterion: str = "likelihood"
@@ -192,9 +198,14 @@ class EstimationOptions:
     grid: bool = True
     internal_mass: bool = False
     wall_factors: bool = False
+    innovations: str = "gaussian"
 
     def check(self):
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
+        _one_of("estimation", "innovations", self.innovations, ("gaussian", "student"))
+        if self.innovations != "gaussian" and self.criterion == "simulation":
+            raise DataError("identify option estimation.innovations needs a Kalman criterion "
+                            "(likelihood or kstep), not 'simulation'")
         for name in ("internal_mass", "wall_factors"):
             if getattr(self, name) and self.criterion == "simulation":
                 raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
@@ -937,7 +948,7 @@ def _local_fit_options(opt) -> dict:
     return dict(criterion=opt.selection.criterion, margin=opt.selection.margin,
                 solar=opt.estimation.solar, internal_mass=opt.estimation.internal_mass,
                 wall_factors=opt.estimation.wall_factors, fit_rows=opt.split.rows,
-                min_t=opt.split.min_t)
+                min_t=opt.split.min_t, innovations=opt.estimation.innovations)
 
 
 def _fitted_network(gb):
@@ -946,7 +957,8 @@ def _fitted_network(gb):
 
 
 def _mass_options(opt) -> dict:
-    """Likelihood options of ``estimation.internal_mass`` and ``wall_factors``: the factors
+    """Likelihood options of ``estimation.internal_mass``, ``wall_factors`` and
+    ``innovations``; with the factors
     and every row, since only rows with known supply heat fix a zone's capacity or a wall's
     UA (on the supply-off rows of the closed-loop testbed the capacity factor drifts to
     10–30 with or without extra mass)."""
@@ -956,6 +968,8 @@ def _mass_options(opt) -> dict:
         out["internal_mass"] = True
     if est.wall_factors:
         out["wall_factors"] = True
+    if est.innovations != "gaussian":
+        out["innovations"] = est.innovations
     return out
 
 

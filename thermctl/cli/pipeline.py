@@ -92,6 +92,10 @@ def identify(
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
+    innovations: str = typer.Option(_D.estimation.innovations, help="Kalman criteria: "
+                                    "distribution of the one-step innovations: gaussian, or "
+                                    "student (a t whose degrees of freedom are fitted: gains "
+                                    "that jump count less)."),
     wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria: fit a UA "
                                       "factor per wall class (exterior, partition, other "
                                       "boundary); local problems: the median of theirs."),
@@ -206,7 +210,8 @@ def identify(
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
                                      initial_state=initial_state, grid=grid,
-                                     internal_mass=internal_mass, wall_factors=wall_factors),
+                                     internal_mass=internal_mass, wall_factors=wall_factors,
+                                     innovations=innovations),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
