@@ -86,8 +86,9 @@ LAYOUTS = {
 }
 
 
-def run_case(study, name, kwargs, seed, days, innovations="gaussian"):
-    """Generate, identify with the defaults (or ``innovations``), score; one dict."""
+def run_case(study, name, kwargs, seed, days, estimation=None):
+    """Generate, identify with the defaults (``estimation``: EstimationOptions fields to
+    change), score; one dict."""
     t0 = time.perf_counter()
     gen_kw = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     weekend = disturbances.HOURLY_WEEKEND
@@ -109,14 +110,14 @@ def run_case(study, name, kwargs, seed, days, innovations="gaussian"):
     row = dict(study=study, case=name, seed=seed, days=days, kwargs=kwargs,
                building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
-    if innovations != "gaussian":
-        row["innovations"] = innovations
+    if estimation:
+        row["estimation"] = dict(estimation)
     t1 = time.perf_counter()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ident = identify(meas, IdentifyOptions(
-                estimation=EstimationOptions(innovations=innovations)))
+                estimation=EstimationOptions(**(estimation or {}))))
     except Exception as exc:            # noqa: BLE001 - a failing run is a result
         row["error"] = f"{type(exc).__name__}: {str(exc)[:120]}"
         return row
@@ -200,6 +201,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="one small building, 6 days")
     ap.add_argument("--innovations", choices=["gaussian", "student"], default="gaussian",
                     help="identify's innovation distribution (student: case names get ' [t]')")
+    ap.add_argument("--fast-gain", action="store_true",
+                    help="identify with a fast gain per zone (case names get ' [fast]')")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
@@ -222,9 +225,12 @@ def main(argv=None):
                 if not args.cases or n in args.cases]
     rows = []
     for study, name, kw, seed, days in jobs:
+        est = {}
         if args.innovations != "gaussian":
-            name += " [t]"
-        row = run_case(study, name, kw, seed, days, innovations=args.innovations)
+            name, est["innovations"] = name + " [t]", args.innovations
+        if args.fast_gain:
+            name, est["fast_gain"] = name + " [fast]", True
+        row = run_case(study, name, kw, seed, days, estimation=est)
         rows.append(row)
         print(json.dumps(row), flush=True)
         if args.save:

@@ -187,6 +187,11 @@ class EstimationOptions:
         multivariate t whose degrees of freedom the data set: occupancy gains that jump
         count logarithmically instead of quadratically (docs/identification.md, "Gains that
         jump: t innovations").
+    fast_gain : bool
+        Kalman criteria: a fast (Ornstein–Uhlenbeck) gain per measured zone beside the
+        random walk, its time constant and size fitted
+        (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`): occupancy that changes
+        by the hour (docs/identification.md, "Gains that jump").
     """
 
     criterion: str = "likelihood"
@@ -199,13 +204,16 @@ class EstimationOptions:
     internal_mass: bool = False
     wall_factors: bool = False
     innovations: str = "gaussian"
+    fast_gain: bool = False
 
     def check(self):
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
         _one_of("estimation", "innovations", self.innovations, ("gaussian", "student"))
-        if self.innovations != "gaussian" and self.criterion == "simulation":
-            raise DataError("identify option estimation.innovations needs a Kalman criterion "
-                            "(likelihood or kstep), not 'simulation'")
+        for name, on in (("innovations", self.innovations != "gaussian"),
+                         ("fast_gain", self.fast_gain)):
+            if on and self.criterion == "simulation":
+                raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
+                                "(likelihood or kstep), not 'simulation'")
         for name in ("internal_mass", "wall_factors"):
             if getattr(self, name) and self.criterion == "simulation":
                 raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
@@ -948,7 +956,8 @@ def _local_fit_options(opt) -> dict:
     return dict(criterion=opt.selection.criterion, margin=opt.selection.margin,
                 solar=opt.estimation.solar, internal_mass=opt.estimation.internal_mass,
                 wall_factors=opt.estimation.wall_factors, fit_rows=opt.split.rows,
-                min_t=opt.split.min_t, innovations=opt.estimation.innovations)
+                min_t=opt.split.min_t, innovations=opt.estimation.innovations,
+                fast_gain=opt.estimation.fast_gain)
 
 
 def _fitted_network(gb):
@@ -957,8 +966,8 @@ def _fitted_network(gb):
 
 
 def _mass_options(opt) -> dict:
-    """Likelihood options of ``estimation.internal_mass``, ``wall_factors`` and
-    ``innovations``; with the factors
+    """Likelihood options of ``estimation.internal_mass``, ``wall_factors``,
+    ``innovations`` and ``fast_gain``; with the factors
     and every row, since only rows with known supply heat fix a zone's capacity or a wall's
     UA (on the supply-off rows of the closed-loop testbed the capacity factor drifts to
     10–30 with or without extra mass)."""
@@ -970,6 +979,8 @@ def _mass_options(opt) -> dict:
         out["wall_factors"] = True
     if est.innovations != "gaussian":
         out["innovations"] = est.innovations
+    if est.fast_gain:
+        out["fast_gain"] = True
     return out
 
 

@@ -96,6 +96,10 @@ def identify(
                                     "distribution of the one-step innovations: gaussian, or "
                                     "student (a t whose degrees of freedom are fitted: gains "
                                     "that jump count less)."),
+    fast_gain: bool = typer.Option(_D.estimation.fast_gain, "--fast-gain/--no-fast-gain",
+                                   help="Kalman criteria: a fast gain per zone (first order, "
+                                   "time constant fitted) beside the random walk: occupancy "
+                                   "that changes by the hour."),
     wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria: fit a UA "
                                       "factor per wall class (exterior, partition, other "
                                       "boundary); local problems: the median of theirs."),
@@ -211,7 +215,7 @@ def identify(
                                      estimator=estimator, window_hours=window_hours,
                                      initial_state=initial_state, grid=grid,
                                      internal_mass=internal_mass, wall_factors=wall_factors,
-                                     innovations=innovations),
+                                     innovations=innovations, fast_gain=fast_gain),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,

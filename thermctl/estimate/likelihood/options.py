@@ -20,6 +20,13 @@ class LikelihoodOptions:
         One R̄_v per convection edge (τ0 stays shared) instead of one for all.
     disturbance : {"random_walk", "none"}
         Random-walk gain state per measured zone, or none (white heat noise only).
+    fast_gain : bool
+        Also a fast gain per measured zone: a first-order (Ornstein–Uhlenbeck) process
+        with its own time constant ``τ_g`` and standard deviation ``σ_g`` (both fitted,
+        shared by the zones), beside the random walk. Occupancy that changes by the hour
+        is a level that jumps and comes back, which a random walk can only follow by
+        wandering everywhere; the fast gain takes the hour-scale part, the random walk the
+        slow drift.
     unmeasured_gain : bool
         Unmeasured zones (a hallway) get the time-of-day basis too (and a constant without
         random walk). Their temperature is only seen through their neighbours, so no
@@ -149,6 +156,7 @@ class LikelihoodOptions:
 
     per_edge: bool = False
     disturbance: str = "random_walk"
+    fast_gain: bool = False
     unmeasured_gain: bool = True
     basis: str | None = None
     harmonics: int = 2

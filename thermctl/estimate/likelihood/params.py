@@ -30,6 +30,8 @@ GROUP_UNITS = {
     "cap_factor": "-",
     "ua_factor": "-",
     "nu": "-",
+    "sigma_g": "W",
+    "tau_g": "s",
 }
 """Unit of each parameter group."""
 

@@ -113,7 +113,8 @@ class LikelihoodProblem:
         self.n_e = self.ny if opt.measurement == "ar1" else 0
         self.bnoise = self._boundary_noise_nodes()
         self.n_b = len(self.bnoise)
-        self.n = self.n_net + self.n_d + self.n_e + self.n_b
+        self.n_g = self.ny if opt.fast_gain else 0
+        self.n = self.n_net + self.n_d + self.n_e + self.n_b + self.n_g
         self.nw = self.nz + self.nb
         self.edges = net.convection_edges
         self.alpha = float(opt.alpha if opt.alpha is not None else net.spec.alpha())
@@ -350,6 +351,9 @@ class LikelihoodProblem:
         if self.n_e:
             self.i_sige = lay.add(Param("sigma_e", "sigma_e", True, 0.015, 1e-4, 1.0))
             self.i_taue = lay.add(Param("tau_e", "tau_e", True, 1800.0, 60.0, 86400.0))
+        if self.n_g:
+            self.i_sigg = lay.add(Param("sigma_g", "sigma_g", True, 50.0, 1.0, 5e3))
+            self.i_taug = lay.add(Param("tau_g", "tau_g", True, 1800.0, 600.0, 6 * 3600.0))
         self.i_cf = []          # capacity factor per measured zone (internal_mass)
         if opt.internal_mass:
             lo_f, hi_f = opt.cap_factor_bounds
@@ -542,6 +546,20 @@ class LikelihoodProblem:
             A = ca.blockcat([[A, Eb], [ca.MX(self.n_b, n_y), -ca.MX.eye(self.n_b) / tau_b]])
             B = ca.vertcat(B, ca.MX(self.n_b, self.nw))
             diag.append(ca.repmat(2 * sig_b ** 2 / tau_b, self.n_b, 1))
+        if self.n_g:
+            # fast gain g (kW) per measured zone: dg = −g/τ_g dt + √(2/τ_g)·σ_g dW, heating
+            # its zone like the random walk does
+            n_y = A.shape[0]
+            tau_g = ca.exp(eta[self.i_taug])
+            sig_g = ca.exp(eta[self.i_sigg]) * _KW
+            Eg = np.zeros((n_y, self.n_g))
+            Eg[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
+            Eg = ca.DM(Eg)
+            if s is not None:
+                Eg = ca.mtimes(ca.diag(ca.vertcat(s, ca.DM.ones(n_y - n_net))), Eg)
+            A = ca.blockcat([[A, Eg], [ca.MX(self.n_g, n_y), -ca.MX.eye(self.n_g) / tau_g]])
+            B = ca.vertcat(B, ca.MX(self.n_g, self.nw))
+            diag.append(ca.repmat(2 * sig_g ** 2 / tau_g, self.n_g, 1))
         Sig = ca.diag(ca.vertcat(*diag))
         R = ca.diag(ca.vertcat(*[ca.exp(2 * eta[i]) for i in self.i_sv]))
         return A, B, Sig, R
@@ -569,7 +587,7 @@ class LikelihoodProblem:
                 Tz = np.full(self.nz, np.nan)
                 Tz[meas] = y_a
                 x = self.model.initial_state(Tz, w_a[self.nz:])
-                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e + self.n_b)]))
+                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e + self.n_b + self.n_g)]))
                 continue
             wbar = ca.DM(w0bar) + ca.vertcat(_KW * ca.mtimes(ThB, ca.DM(bbar)), ca.DM.zeros(self.nb))
             bvec = ca.mtimes(Bnet, wbar)
@@ -588,8 +606,8 @@ class LikelihoodProblem:
                     cap = cap * ca.exp(ca.vertcat(*[eta[i] for i in self.i_cf]))
                 phi = -imb * cap * _KW
                 x0 = ca.vertcat(x0, phi)
-            if self.n_e + self.n_b:
-                x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e + self.n_b))
+            if self.n_e + self.n_b + self.n_g:
+                x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e + self.n_b + self.n_g))
             cols.append(x0)
         return ca.horzcat(*cols)
 
