@@ -131,3 +131,20 @@ def test_forward_stops_at_an_inconsistent_best_candidate_and_says_why():
     assert res.reasons[b].startswith("out: bic -120.0 when added, but its gain is not consistent")
     a = [k for k in res.reasons if k.startswith("air:A")][0]
     assert res.reasons[a].startswith("out: last screening bic change -100.0")
+
+
+def test_search_fits_each_structure_once():
+    """Every structure is fitted once: the backward trial that removes the edge added last
+    is the structure before it (one full fit of the ~4 a local problem makes)."""
+    stub = _Stub()
+    stub.consistent = lambda small, big: (True, float("nan"), "")
+    calls = []
+    fit = stub.fit
+    stub.fit = lambda edges, warm=None: calls.append(tuple(sorted(c.a for c in edges))) \
+        or fit(edges, warm)
+    res = search_edges(_cands(), stub, direction="both", margin=10.0)
+    assert sorted(c.a for c in res.edges) == ["A", "B"]
+    # forward: (), (A,), (A, B); backward trials: (B,) is new, (A,) is the forward one
+    assert calls == [(), ("A",), ("A", "B"), ("B",)]
+    keep = [s for s in res.path if s.action == "keep"][0]
+    assert keep.screened == {"air:A-z": -60.0 + 150.0, "air:B-z": -100.0 + 150.0}

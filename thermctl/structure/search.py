@@ -214,6 +214,10 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     crit = scorer.name
     cur = list(cands) if direction == "backward" else list(start)
     fitted, val = scorer.fit(cur)
+    # every structure fitted so far: a backward trial that removes the edge added last is
+    # the structure before it, already fitted (one full fit of the ~4 of a local problem
+    # that keeps one path)
+    done = {frozenset(c.name for c in cur): (fitted, val)}
     path = [SelectionStep("start", None, val, 0.0, [c.name for c in cur],
                           note=f"{len(cur)} edge(s)")]
     reasons, best_screen = {}, {}
@@ -241,6 +245,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             pick = min(screened, key=screened.get)
             c = by_name[pick]
             f_full, v_full = scorer.fit(cur + [c], warm=fitted)
+            done[frozenset(x.name for x in cur + [c])] = (f_full, v_full)
             d = v_full - val
             ok, _, why = holds(fitted, f_full) if d < -margin else (True, 0.0, "")
             if d < -margin and not ok:
@@ -276,7 +281,11 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         while cur:
             trials = {}
             for c in cur:
-                f2, v2 = scorer.fit([x for x in cur if x != c], warm=fitted)
+                rest = [x for x in cur if x != c]
+                key = frozenset(x.name for x in rest)
+                if key not in done:
+                    done[key] = scorer.fit(rest, warm=fitted)
+                f2, v2 = done[key]
                 trials[c.name] = (v2 - val, f2, v2)
             # an edge whose gain does not hold consistently goes first (the weakest such)
             weak, said = {}, {}
