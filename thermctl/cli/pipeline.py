@@ -22,6 +22,7 @@ from ._common import console, handle_errors, progress, read_options
 
 # CLI defaults are read from the dataclasses: one place for each default
 _D = IdentifyOptions()
+_FAST_GAIN = {"on": True, "off": False}     # --fast-gain words → EstimationOptions.fast_gain
 
 UNITS_HELP = "Units of the data file: si (°C, kg/s) or imperial (°F, CFM)."
 
@@ -96,10 +97,11 @@ def identify(
                                     "distribution of the one-step innovations: gaussian, or "
                                     "student (a t whose degrees of freedom are fitted: gains "
                                     "that jump count less)."),
-    fast_gain: bool = typer.Option(_D.estimation.fast_gain, "--fast-gain/--no-fast-gain",
-                                   help="Kalman criteria: a fast gain per zone (first order, "
-                                   "time constant fitted) beside the random walk: occupancy "
-                                   "that changes by the hour."),
+    fast_gain: str = typer.Option("auto", "--fast-gain", help="Kalman criteria, "
+                                  "whole-building fits: a fast gain per zone (first order, "
+                                  "time constant fitted) beside the random walk, for "
+                                  "occupancy that changes by the hour: auto (kept when it "
+                                  "improves BIC by more than --margin), on or off."),
     wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria: fit a UA "
                                       "factor per wall class (exterior, partition, other "
                                       "boundary); local problems: the median of theirs."),
@@ -215,7 +217,8 @@ def identify(
                                      estimator=estimator, window_hours=window_hours,
                                      initial_state=initial_state, grid=grid,
                                      internal_mass=internal_mass, wall_factors=wall_factors,
-                                     innovations=innovations, fast_gain=fast_gain),
+                                     innovations=innovations,
+                                     fast_gain=_FAST_GAIN.get(fast_gain, fast_gain)),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
