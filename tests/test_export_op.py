@@ -245,3 +245,23 @@ def test_rendered_docs_have_math_and_no_raw_sphinx_roles(tmp_path):
     assert not raw, f"raw Sphinx roles on the API page: {raw[:5]}"
     assert ".. math::" not in api and 'class="arithmatex"' in api
     assert "LikelihoodEstimator" in api and "select_air_paths" in api and "balanced_reduction" in api
+
+
+def test_fast_gain_is_exported_with_its_stationary_variance():
+    """``sigma_g``, ``tau_g`` of a fit with the fast gain: a first-order state per measured
+    zone heating its zone, whose stationary variance (Lyapunov) is σ_g²."""
+    from scipy.linalg import solve_continuous_lyapunov
+    from thermctl.export.kalman import augment_noise
+    A0 = np.array([[-1e-4, 5e-5], [5e-5, -1e-4]])
+    cz = np.array([2e5, 3e5])
+    p = {"sigma_q": 5.0, "sigma_phi": 0.3, "sigma_v": 0.05, "sigma_g": 40.0, "tau_g": 1800.0}
+    A, C, Qc, R, extra = augment_noise(p, A0, cz, ["a", "b"], ["a", "b"])
+    assert extra == ["d[a]", "d[b]", "g[a]", "g[b]"]
+    g = [4, 5]
+    assert A[0, 4] == pytest.approx(1 / 2e5) and A[1, 5] == pytest.approx(1 / 3e5)
+    assert A[0, 5] == 0.0 and np.all(A[4:, :4] == 0.0)
+    P = solve_continuous_lyapunov(A[np.ix_(g, g)], -Qc[np.ix_(g, g)])
+    assert np.allclose(np.diag(P), 40.0 ** 2)
+    A1, *_ , extra1 = augment_noise({k: v for k, v in p.items() if k not in ("sigma_g", "tau_g")},
+                                     A0, cz, ["a", "b"], ["a", "b"])
+    assert extra1 == ["d[a]", "d[b]"] and np.array_equal(A1, A[:4, :4])

@@ -96,8 +96,9 @@ def augment_noise(params: dict, A0, cz, zones, measured):
     """The grey-box noise model on a network's state matrix: augmented ``A``, ``C``, ``Qc``, ``R``.
 
     The state is the network's (``n_net`` states, zones first) followed by one random-walk
-    heat gain ``d[z]`` [W] per measured zone if ``sigma_phi`` is given, and the AR(1) sensor
-    errors ``e[z]`` [K] if ``sigma_e`` and ``tau_e`` are. Shared by :func:`kalman_filter`
+    heat gain ``d[z]`` [W] per measured zone if ``sigma_phi`` is given, the AR(1) sensor
+    errors ``e[z]`` [K] if ``sigma_e`` and ``tau_e`` are, and the fast (first-order) gains
+    ``g[z]`` [W] if ``sigma_g`` and ``tau_g`` are. Shared by :func:`kalman_filter`
     (at an operating point) and by filters whose network block changes with the supply
     flow (the MPC examples'), so the noise model is written once.
 
@@ -125,7 +126,7 @@ def augment_noise(params: dict, A0, cz, zones, measured):
     R : ndarray, shape (n_measured, n_measured)
         Sensor noise covariance [K²].
     extra : list of str
-        Names of the states after the network's (``d[z]``, then ``e[z]``).
+        Names of the states after the network's (``d[z]``, then ``e[z]``, then ``g[z]``).
     """
     p = params
     if any(k.startswith(("sigma_b", "tau_b")) for k in p):
@@ -137,8 +138,9 @@ def augment_noise(params: dict, A0, cz, zones, measured):
     ny = len(measured)
     has_d = any(k == "sigma_phi" or k.startswith("sigma_phi[") for k in p)
     has_e = "sigma_e" in p and "tau_e" in p
-    nd, ne = (ny if has_d else 0), (ny if has_e else 0)
-    n = n_net + nd + ne
+    has_g = "sigma_g" in p and "tau_g" in p
+    nd, ne, ng = (ny if has_d else 0), (ny if has_e else 0), (ny if has_g else 0)
+    n = n_net + nd + ne + ng
     A = np.zeros((n, n))
     A[:n_net, :n_net] = A0
     Qc = np.zeros((n, n))
@@ -160,6 +162,14 @@ def augment_noise(params: dict, A0, cz, zones, measured):
         Qc[k, k] = 2.0 * sig_e ** 2 / tau_e
         C[np.arange(ny), k] = 1.0
         extra += [f"e[{z}]" for z in measured]
+    if ng:
+        # the fast gain g[z] [W]: first order, stationary standard deviation σ_g
+        tau_g, sig_g = float(p["tau_g"]), float(p["sigma_g"])
+        k = n_net + nd + ne + np.arange(ng)
+        A[mi, k] = 1.0 / cz[mi]
+        A[k, k] = -1.0 / tau_g
+        Qc[k, k] = 2.0 * sig_g ** 2 / tau_g
+        extra += [f"g[{z}]" for z in measured]
     R = np.diag(_per(p, "sigma_v", measured, "every measured zone") ** 2)
     return A, C, Qc, R, extra
 
@@ -200,7 +210,7 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
     A, C, Qc, R, extra = augment_noise(p, A0, cz, net.zones, measured)
     B = np.zeros((A.shape[0], B0.shape[1]))
     B[:n_net] = B0
-    used = {k: float(v) for k, v in p.items() if k.startswith(("sigma_", "tau_e"))}
+    used = {k: float(v) for k, v in p.items() if k.startswith(("sigma_", "tau_e", "tau_g"))}
     kf = KalmanFilter(states=list(net.state_names) + extra, inputs=net.input_names + dist.names,
                       outputs=[f"T[{z}]" for z in measured], A=A, B=B, C=C, Qc=Qc, R=R,
                       params=used)
