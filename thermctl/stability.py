@@ -350,13 +350,13 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
     days = resample_days(frame, resamples, fraction=fraction, block_days=block_days, seed=seed)
     frames = [mask_days(frame, ks) for ks in days]
     n = len(problems)
-    results = run_local(list(problems) * len(days), [f for f in frames for _ in range(n)],
-                        workers=workers, client=client, progress=progress,
+    every = list(problems) * len(days)          # every problem on every resample
+    tables = [f for f in frames for _ in range(n)]
+    results = run_local(every, tables, workers=workers, client=client, progress=progress,
                         margin=margin, **fit_kwargs)
     if confirm and rule == "both":
-        results = confirm_local(list(problems) * len(days), results,
-                                [f for f in frames for _ in range(n)], workers=workers,
-                                client=client, progress=progress,
+        results = confirm_local(every, results, tables, workers=workers, client=client,
+                                progress=progress,
                                 groups=[b for b in range(len(days)) for _ in range(n)],
                                 margin=margin, **fit_kwargs)
     out = []
