@@ -51,6 +51,7 @@ from ...model import RBAR_V_PAPER, ConvectionParameters, ThermalModel
 from ...network import ThermalNetwork
 from ...spec import WALL_CLASSES, is_outdoor, wall_class
 from . import kalman
+from ._dense import dense_mtimes
 from ..data import EstimationData
 from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
 from .options import LikelihoodOptions
@@ -650,7 +651,7 @@ class LikelihoodProblem:
         F = Phi - ca.mtimes(PhiK, C)
         ThB_full = ca.vertcat(ThB, ca.MX(self.nb, ThB.shape[1]))
         W = ca.DM(self.W0_lay) + _KW * ca.mtimes(ThB_full, ca.DM(self.B_lay))
-        GZ = ca.mtimes(Gam, W) + ca.mtimes(PhiK, ca.DM(self.Y_lay))
+        GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay))
         X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L)
         E = ca.DM(self.Y_lay) - ca.mtimes(C, X)
         Em = E * ca.DM(np.tile(self.mask, (self.ny, 1)))

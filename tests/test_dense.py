@@ -1,0 +1,47 @@
+"""BLAS products inside CasADi graphs: same values and derivatives as ``casadi.mtimes``."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from thermctl.estimate.likelihood._dense import dense_mtimes
+
+
+def _graphs(n, k, m, seed):
+    """f(x) built twice, with dense_mtimes and with casadi.mtimes, on the same x."""
+    rng = np.random.default_rng(seed)
+    x = ca.MX.sym("x", 4)
+    Ma, Mb = rng.normal(size=(n * k, 4)), rng.normal(size=(k * m, 4))
+    A = ca.reshape(ca.sin(ca.mtimes(ca.DM(Ma), x)), n, k)
+    B = ca.reshape(ca.exp(0.3 * ca.mtimes(ca.DM(Mb), x)), k, m)
+    out = []
+    for mt in (dense_mtimes, ca.mtimes):
+        C = mt(mt(A, B), B.T)           # a product of a product: second order through both
+        out.append(C)
+    return x, rng.normal(size=4), out
+
+
+@pytest.mark.parametrize("n,k,m", [(3, 5, 2), (7, 7, 7), (1, 4, 6)])
+def test_values_and_exact_derivatives(n, k, m):
+    x, x0, (C1, C2) = _graphs(n, k, m, seed=n + k + m)
+    vals = []
+    for C in (C1, C2):
+        f = ca.sum1(ca.sum2(ca.cos(C)))
+        H, g = ca.hessian(f, x)
+        J = ca.jacobian(ca.vec(C), x)          # 4 inputs, many outputs: forward mode
+        Jr = ca.jacobian(ca.vertcat(f, 2 * f), x)      # 2 outputs: reverse mode
+        vals.append([np.asarray(v) for v in ca.Function("f", [x], [C, g, H, J, Jr])(x0)])
+    for a, b in zip(*vals):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    # and the derivative is that of the function: central differences of the gradient
+    f = ca.Function("g", [x], [ca.gradient(ca.sum1(ca.sum2(ca.cos(C1))), x)])
+    h = 1e-5
+    Hfd = np.column_stack([(np.asarray(f(x0 + h * e)) - np.asarray(f(x0 - h * e))).ravel()
+                           / (2 * h) for e in np.eye(4)])
+    np.testing.assert_allclose(vals[0][2], Hfd, rtol=1e-6, atol=1e-7)
+
+
+def test_shapes_checked():
+    with pytest.raises(ValueError, match="inner dimensions"):
+        dense_mtimes(ca.MX.sym("a", 2, 3), ca.MX.sym("b", 2, 3))
+    assert dense_mtimes(ca.MX.sym("a", 0, 3), ca.MX.sym("b", 3, 2)).shape == (0, 2)
