@@ -45,3 +45,41 @@ def test_shapes_checked():
     with pytest.raises(ValueError, match="inner dimensions"):
         dense_mtimes(ca.MX.sym("a", 2, 3), ca.MX.sym("b", 2, 3))
     assert dense_mtimes(ca.MX.sym("a", 0, 3), ca.MX.sym("b", 3, 2)).shape == (0, 2)
+
+
+def _sequential(F, G, S, restart, L):
+    """x_{k+1} = F x_k + g_k step by step in time order (MX), from the chunk layout."""
+    n, M = F.shape[0], len(restart)
+    cols = [None] * (L * M)
+    x = None
+    for c in range(M):
+        for j in range(L):
+            if j == 0 and restart[c] >= 0:
+                x = S[:, restart[c]]
+            cols[j * M + c] = x
+            x = ca.mtimes(F, x) + G[:, j * M + c]
+    return ca.horzcat(*cols)
+
+
+@pytest.mark.parametrize("L,restart", [(4, [0, -1, -1, 1, -1, 2]), (1, [0, -1, 1]),
+                                       (8, [0])])
+def test_recursion_matches_step_by_step(L, restart):
+    from thermctl.estimate.likelihood._dense import linear_recursion
+    rng = np.random.default_rng(L)
+    n, M = 3, len(restart)
+    nseg = max(restart) + 1
+    x = ca.MX.sym("x", 3)
+    F0 = rng.normal(size=(n, n)) * 0.3
+    F = ca.DM(F0) + ca.diag(0.2 * ca.tanh(x))          # F, G and the starts depend on x
+    G = ca.DM(rng.normal(size=(n, L * M))) * ca.exp(x[1])
+    S = ca.DM(rng.normal(size=(n, nseg))) * (1 + x[2] ** 2)
+    W = ca.DM(rng.normal(size=(n, L * M)))
+    x0 = rng.normal(size=3)
+    out = []
+    for X in (linear_recursion(F, G, S, restart, L), _sequential(F, G, S, restart, L)):
+        f = ca.sum1(ca.sum2(W * X)) + ca.sumsqr(X) / 7
+        H, g = ca.hessian(f, x)
+        J = ca.jacobian(ca.vec(X), x)
+        out.append([np.asarray(v) for v in ca.Function("f", [x], [X, f, g, H, J])(x0)])
+    for a, b in zip(*out):
+        np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)

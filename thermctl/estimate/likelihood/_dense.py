@@ -20,7 +20,7 @@ import threading
 import casadi as ca
 import numpy as np
 
-__all__ = ["dense_mtimes"]
+__all__ = ["dense_mtimes", "linear_recursion"]
 
 # one callback per shape, kept alive here: a CasADi graph holds only a reference to it
 _CACHE: dict = {}
@@ -122,3 +122,258 @@ class _Matmul(ca.Callback):
         Ab = ca.horzcat(*[CbBt[i * n:(i + 1) * n, :] for i in range(nadj)])
         Bb = dense_mtimes(A.T, Cb)
         return ca.Function(name, [A, B, C, Cb], [Ab, Bb], inames, onames, opts)
+
+
+# ---------------------------------------------------------------------- the recursion
+def linear_recursion(F, GZ, starts, restart, L: int):
+    r"""All states of ``x_{k+1} = F x_k + g_k``, segment by segment, evaluated by numpy.
+
+    The contract of :func:`thermctl.estimate.likelihood.kalman.chunked_recursion` (chunk
+    layout: column ``j·M + c`` is step ``j`` of chunk ``c``; chunk ``c`` starts segment
+    ``restart[c]`` or continues chunk ``c − 1``). One graph node instead of ``2L + M``
+    products. Its derivatives are again recursions (the adjoint runs backward in time with
+    ``Fᵀ``; see :class:`_Recursion`), so they are exact to every order.
+
+    Parameters
+    ----------
+    F : casadi.MX, shape (n, n)
+    GZ : casadi.MX, shape (n, L·M)
+    starts : casadi.MX, shape (n, n_segments)
+    restart : sequence of int, length M
+    L : int
+
+    Returns
+    -------
+    casadi.MX, shape (n, L·M)
+    """
+    n, M = F.shape[0], len(restart)
+    cb = _cached(("rec", n, L, tuple(restart), starts.shape[1]), _Recursion)
+    return cb(ca.densify(F), ca.densify(GZ), ca.densify(starts))
+
+
+def _adjoint(F, Xb, restart, L: int):
+    """``Ḡ`` of :func:`linear_recursion` for the output seed ``Xb`` (see :class:`_Adjoint`)."""
+    n = F.shape[0]
+    cb = _cached(("adj", n, L, tuple(restart)), _Adjoint)
+    return cb(ca.densify(F), ca.densify(Xb))
+
+
+def _cached(key, cls):
+    with _LOCK:
+        cb = _CACHE.get(key)
+        if cb is None:
+            cb = _CACHE[key] = cls(*key[1:])
+    return cb
+
+
+def _rec_np(F, G, S, restart, L, out):
+    """numpy kernel of :func:`linear_recursion` into ``out``; ``G`` and ``out`` are (n, L·M)
+    column-major chunk layouts, viewed as (n, M, L) so that every step is one contiguous block."""
+    n, M = F.shape[0], len(restart)
+    G3 = G.reshape((n, M, L), order="F")           # [i, c, j] = G[i, j·M + c]
+    X = out.reshape((n, M, L), order="F")
+    # pass 1: every chunk from zero (X[:, :, j] holds that partial state for now)
+    X[:, :, 0] = 0.0
+    last = np.zeros((n, M))
+    for j in range(L):
+        nxt = X[:, :, j + 1] if j + 1 < L else last
+        np.matmul(F, X[:, :, j], out=nxt)
+        nxt += G3[:, :, j]
+    # chain the chunk starts
+    FL = np.linalg.matrix_power(F, L)
+    H = np.empty((n, M), order="F")
+    x = None
+    for c in range(M):
+        if restart[c] >= 0:
+            x = S[:, restart[c]]
+        H[:, c] = x
+        x = FL @ x + last[:, c]
+    # pass 2: add F^j x_{c,0}
+    for j in range(L):
+        X[:, :, j] += H
+        if j + 1 < L:
+            H = F @ H
+
+
+def _adj_np(F, Xb, restart, L, out):
+    """numpy kernel of the adjoint into ``out``: ``Ḡ_k = λ_{k+1}`` where the step k → k+1
+    exists, else 0, with ``λ_k = X̄_k + Fᵀ λ_{k+1}`` backward in each segment."""
+    n, M = F.shape[0], len(restart)
+    FT = F.T
+    Xb3 = Xb.reshape((n, M, L), order="F")
+    Gb = out.reshape((n, M, L), order="F")
+    # λ within each chunk with nothing coming in: λ_{c,j} is stored at Gb[:, c, j − 1]
+    acc = np.array(Xb3[:, :, L - 1], order="F")
+    first = np.empty((n, M))
+    for j in range(L - 1, 0, -1):
+        Gb[:, :, j - 1] = acc
+        acc = FT @ acc
+        acc += Xb3[:, :, j - 1]
+    first[:] = acc                                   # λ_{c,0} of the chunk alone
+    FLT = np.linalg.matrix_power(FT, L)
+    mu = np.zeros((n, M), order="F")                 # λ at the start of the next chunk
+    nxt = np.zeros(n)
+    for c in range(M - 1, -1, -1):
+        if c + 1 < M and restart[c + 1] < 0:
+            mu[:, c] = nxt
+        nxt = first[:, c] + FLT @ mu[:, c]
+    # add what comes in from the next chunk: λ_{c,j} += (Fᵀ)^{L−j} μ_c
+    Gb[:, :, L - 1] = mu
+    Hb = mu
+    for j in range(L - 1, 0, -1):
+        Hb = FT @ Hb
+        Gb[:, :, j - 1] += Hb
+
+
+def _view(buf, shape):
+    return np.frombuffer(buf, dtype=float).reshape(shape, order="F")
+
+
+class _Recursion(ca.Callback):
+    """``X = rec(F, GZ, starts)`` (:func:`linear_recursion`).
+
+    Derivatives: forward ``Ẋ = rec(F, ĠZ + Ḟ X, ṡtarts)``; reverse ``ḠZ = adj(F, X̄)``,
+    ``F̄ = ḠZ Xᵀ``, ``s̄tarts`` from ``λ`` at each segment's first step.
+    """
+
+    def __init__(self, n, L, restart, nseg):
+        ca.Callback.__init__(self)
+        self.n, self.L, self.restart, self.nseg = n, L, list(restart), nseg
+        self.M = len(restart)
+        sel = np.zeros((self.M, nseg))
+        for c, s in enumerate(self.restart):
+            if s >= 0:
+                sel[c, s] = 1.0
+        self.sel = ca.DM(sel)
+        self.construct(f"recursion_{n}x{L}x{self.M}_{id(self):x}", {"enable_fd": False})
+
+    def get_n_in(self):
+        return 3
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        cols = (self.n, self.L * self.M, self.nseg)[i]
+        return ca.Sparsity.dense(self.n, cols)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(self.n, self.L * self.M)
+
+    def has_eval_buffer(self):
+        return True
+
+    def eval_buffer(self, arg, res):
+        n, LM = self.n, self.L * self.M
+        _rec_np(_view(arg[0], (n, n)), _view(arg[1], (n, LM)), _view(arg[2], (n, self.nseg)),
+                self.restart, self.L, _view(res[0], (n, LM)))
+        return 0
+
+    def _syms(self):
+        n, LM = self.n, self.L * self.M
+        return (ca.MX.sym("F", n, n), ca.MX.sym("GZ", n, LM), ca.MX.sym("S", n, self.nseg),
+                ca.MX.sym("X", n, LM))
+
+    def has_forward(self, nfwd):
+        return True
+
+    def get_forward(self, nfwd, name, inames, onames, opts):
+        n, LM, ns = self.n, self.L * self.M, self.nseg
+        F, GZ, S, X = self._syms()
+        dF = ca.MX.sym("dF", n, n * nfwd)
+        dG = ca.MX.sym("dG", n, LM * nfwd)
+        dS = ca.MX.sym("dS", n, ns * nfwd)
+        out = [linear_recursion(F, dG[:, i * LM:(i + 1) * LM]
+                                + dense_mtimes(dF[:, i * n:(i + 1) * n], X),
+                                dS[:, i * ns:(i + 1) * ns], self.restart, self.L)
+               for i in range(nfwd)]
+        return ca.Function(name, [F, GZ, S, X, dF, dG, dS], [ca.horzcat(*out)], inames, onames,
+                           opts)
+
+    def has_reverse(self, nadj):
+        return True
+
+    def get_reverse(self, nadj, name, inames, onames, opts):
+        n, LM, M = self.n, self.L * self.M, self.M
+        F, GZ, S, X = self._syms()
+        Xb = ca.MX.sym("Xb", n, LM * nadj)
+        Fb, Gb, Sb = [], [], []
+        for i in range(nadj):
+            xb = Xb[:, i * LM:(i + 1) * LM]
+            gb = _adjoint(F, xb, self.restart, self.L)
+            Fb.append(dense_mtimes(gb, X.T))
+            Gb.append(gb)
+            # λ at a chunk's first step (columns 0..M−1): X̄ there plus Fᵀ λ one step on
+            Sb.append(ca.mtimes(xb[:, :M] + dense_mtimes(F.T, gb[:, :M]), self.sel))
+        return ca.Function(name, [F, GZ, S, X, Xb],
+                           [ca.horzcat(*Fb), ca.horzcat(*Gb), ca.horzcat(*Sb)],
+                           inames, onames, opts)
+
+
+class _Adjoint(ca.Callback):
+    """``Ḡ = adj(F, X̄)``: the reverse sweep of :class:`_Recursion`, linear in ``X̄``.
+
+    Derivatives: forward ``Ḡ̇ = adj(F, Ẋ̄ + Ḟᵀ Ḡ)``; reverse ``ν = rec(F, Ḡ̄, 0)``,
+    ``X̄̄ = ν``, ``F̄ = Ḡ νᵀ``.
+    """
+
+    def __init__(self, n, L, restart):
+        ca.Callback.__init__(self)
+        self.n, self.L, self.restart = n, L, list(restart)
+        self.M = len(restart)
+        self.nseg = max(max(self.restart) + 1, 1)
+        self.construct(f"recursion_adj_{n}x{L}x{self.M}_{id(self):x}", {"enable_fd": False})
+
+    def get_n_in(self):
+        return 2
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.n, self.n if i == 0 else self.L * self.M)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(self.n, self.L * self.M)
+
+    def has_eval_buffer(self):
+        return True
+
+    def eval_buffer(self, arg, res):
+        n, LM = self.n, self.L * self.M
+        _adj_np(_view(arg[0], (n, n)), _view(arg[1], (n, LM)), self.restart, self.L,
+                _view(res[0], (n, LM)))
+        return 0
+
+    def _syms(self):
+        n, LM = self.n, self.L * self.M
+        return ca.MX.sym("F", n, n), ca.MX.sym("Xb", n, LM), ca.MX.sym("Gb", n, LM)
+
+    def has_forward(self, nfwd):
+        return True
+
+    def get_forward(self, nfwd, name, inames, onames, opts):
+        n, LM = self.n, self.L * self.M
+        F, Xb, Gb = self._syms()
+        dF = ca.MX.sym("dF", n, n * nfwd)
+        dX = ca.MX.sym("dX", n, LM * nfwd)
+        out = [_adjoint(F, dX[:, i * LM:(i + 1) * LM]
+                        + dense_mtimes(dF[:, i * n:(i + 1) * n].T, Gb), self.restart, self.L)
+               for i in range(nfwd)]
+        return ca.Function(name, [F, Xb, Gb, dF, dX], [ca.horzcat(*out)], inames, onames, opts)
+
+    def has_reverse(self, nadj):
+        return True
+
+    def get_reverse(self, nadj, name, inames, onames, opts):
+        n, LM = self.n, self.L * self.M
+        F, Xb, Gb = self._syms()
+        Gbb = ca.MX.sym("Gbb", n, LM * nadj)
+        zero = ca.MX(n, self.nseg)
+        Fb, Xbb = [], []
+        for i in range(nadj):
+            nu = linear_recursion(F, Gbb[:, i * LM:(i + 1) * LM], zero, self.restart, self.L)
+            Fb.append(dense_mtimes(Gb, nu.T))
+            Xbb.append(nu)
+        return ca.Function(name, [F, Xb, Gb, Gbb], [ca.horzcat(*Fb), ca.horzcat(*Xbb)],
+                           inames, onames, opts)

@@ -50,7 +50,7 @@ import scipy.linalg as sla
 
 from ..._blas import single_thread_blas
 from ...errors import EstimationError
-from ._dense import dense_mtimes
+from ._dense import dense_mtimes, linear_recursion
 
 __all__ = ["expm_taylor", "n_squarings", "discretize", "discretize_np", "dare_sda", "dare_np",
            "stein_np", "DareCallback", "process_noise_np",
@@ -309,8 +309,10 @@ def chunked_recursion(F, GZ, starts, restart, L: int):
     The time axis is cut into ``M`` chunks of ``L`` steps. Column ``j·M + c`` of ``GZ``
     holds ``g`` at step ``j`` of chunk ``c``. Pass 1 runs all chunks at once from zero;
     the chunk starts are then chained with ``F^L`` (or restarted at a segment's initial
-    state); pass 2 adds :math:`F^j x_{c,0}`. Sequential depth ``2L + M`` instead of
-    ``L·M``, which is what makes the CasADi graph and its reverse derivative cheap.
+    state); pass 2 adds :math:`F^j x_{c,0}`: ``2L + M`` dense products instead of ``L·M``
+    matrix-vector steps. The whole recursion is one graph node evaluated by numpy
+    (:func:`~thermctl.estimate.likelihood._dense.linear_recursion`), whose derivatives
+    are again recursions: exact gradients and Hessians.
 
     Parameters
     ----------
@@ -330,31 +332,9 @@ def chunked_recursion(F, GZ, starts, restart, L: int):
     X : casadi.MX, shape (n, L·M)
         ``x`` at every step, in the chunk layout.
     """
-    n = F.shape[0]
-    M = len(restart)
-    Xp = [ca.MX(n, M)]
-    for j in range(L):
-        Xp.append(dense_mtimes(F, Xp[-1]) + GZ[:, j * M:(j + 1) * M])
-    FL = F
-    p = 1
-    while p < L:            # L is a power of two (see ChunkLayout)
-        FL = dense_mtimes(FL, FL)
-        p *= 2
-    cols = []
-    x = None
-    for c in range(M):
-        if restart[c] >= 0:
-            x = starts[:, restart[c]]
-        elif x is None:
-            raise EstimationError("chunk layout: the first chunk must start a segment")
-        cols.append(x)
-        x = ca.mtimes(FL, x) + Xp[L][:, c]
-    H = ca.horzcat(*cols)
-    X = []
-    for j in range(L):
-        X.append(Xp[j] + H)
-        H = dense_mtimes(F, H)
-    return ca.horzcat(*X)
+    if any(r < 0 for r in restart[:1]):
+        raise EstimationError("chunk layout: the first chunk must start a segment")
+    return linear_recursion(F, GZ, starts, restart, L)
 
 
 @dataclass
