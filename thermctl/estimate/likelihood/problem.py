@@ -721,7 +721,7 @@ class LikelihoodProblem:
             W = ca.DM(self.W0[:, idx]) + _KW * ca.mtimes(ThB_full, ca.DM(self.Bas[:, idx]))
             fb = ca.DM(self.sup_gain[idx].T) * (ca.mtimes(CT, Xh) - ca.DM(self.Tbar[idx].T))
             W = W - ca.mtimes(Sz, fb)
-            Xh = ca.mtimes(Phi, Xh) + ca.mtimes(Gam, W)
+            Xh = dense_mtimes(Phi, Xh) + dense_mtimes(Gam, W)
             err = ca.DM(self.Y[self.kstarts + i].T) - ca.mtimes(C, Xh)
             J = J + ca.sumsqr(err)
         return J
