@@ -83,3 +83,27 @@ def test_recursion_matches_step_by_step(L, restart):
         out.append([np.asarray(v) for v in ca.Function("f", [x], [X, f, g, H, J])(x0)])
     for a, b in zip(*out):
         np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="glibc only")
+def test_keep_heap_reuses_freed_memory():
+    """After keep_heap, 100 MB of arrays freed and allocated again are not page-faulted in
+    again (glibc's default trims the freed heap: measured 123 000 minor faults for the ten
+    rounds below in a fresh process, 0 with keep_heap)."""
+    import os
+    import resource
+
+    from thermctl._blas import keep_heap
+    if os.environ.get("MALLOC_MMAP_THRESHOLD_"):
+        pytest.skip("the user's own malloc settings")
+    assert keep_heap() and keep_heap()
+
+    def touch():
+        a = [np.ones(1 << 19) for _ in range(25)]        # 25 blocks of 4 MB
+        return sum(float(x[-1]) for x in a)
+
+    touch(), touch()
+    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(10):
+        touch()
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0 < 1000

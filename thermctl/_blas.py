@@ -7,18 +7,59 @@ one thread, and one 61×61 LU solve of the grey-box filter 20 ms against 0.3 ms.
 
 This is the only such helper: model, estimate, greybox and testbed all call
 :func:`single_thread_blas`.
+
+The same call keeps freed memory in the process (:func:`keep_heap`): a gradient of the
+likelihood allocates and frees tens of megabytes of CasADi work arrays, and glibc's default
+returns each large block to the system, so the next call page-faults it in again.
+Measured on the demo (7 zones, 61 states): one gradient 71 → 52 ms; the whole demo 37 → 28 s
+of wall time, system time 7.4 → 0.5 s.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import os
+import sys
 import threading
 
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["single_thread_blas"]
+__all__ = ["single_thread_blas", "keep_heap"]
 
 _CONTROLLER = None
+_HEAP_SET = False
+
+# glibc mallopt parameters
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3
+
+
+def keep_heap() -> bool:
+    """Let glibc keep freed blocks up to 256 MB instead of returning them to the system.
+
+    Blocks up to 32 MB (glibc's largest threshold) come from the heap rather than from a
+    fresh ``mmap``, and up to 256 MB of free heap stay mapped. Once per process; a no-op
+    elsewhere than glibc or when the user set ``MALLOC_MMAP_THRESHOLD_`` themselves.
+
+    Returns
+    -------
+    bool
+        Whether the settings were applied (now or before).
+    """
+    global _HEAP_SET
+    if _HEAP_SET:
+        return True
+    _HEAP_SET = True
+    if os.environ.get("MALLOC_MMAP_THRESHOLD_") or not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        ok = (libc.mallopt(_M_MMAP_THRESHOLD, 32 << 20) == 1
+              and libc.mallopt(_M_TRIM_THRESHOLD, 256 << 20) == 1
+              and libc.mallopt(_M_TOP_PAD, 64 << 20) == 1)
+    except (OSError, AttributeError):
+        return False
+    return bool(ok)
 
 
 def single_thread_blas():
@@ -29,6 +70,7 @@ def single_thread_blas():
     ``threadpool_limits`` rescans the loaded libraries on every call.
     """
     global _CONTROLLER
+    keep_heap()
     if threading.current_thread() is not threading.main_thread():
         return contextlib.nullcontext()
     if _CONTROLLER is None:

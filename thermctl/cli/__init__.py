@@ -73,4 +73,6 @@ except ImportError:  # pragma: no cover
 
 
 def main():  # pragma: no cover - console entry point
+    from .._blas import keep_heap
+    keep_heap()
     app()
