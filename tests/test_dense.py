@@ -107,3 +107,20 @@ def test_keep_heap_reuses_freed_memory():
     for _ in range(10):
         touch()
     assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0 < 1000
+
+
+def test_buffered_function_equals_call_and_is_reused():
+    from thermctl.estimate.likelihood._dense import BufferedFunction
+    x = ca.MX.sym("x", 3)
+    f = ca.Function("f", [x], [ca.sumsqr(ca.sin(x)), ca.densify(ca.gradient(ca.sumsqr(x), x))])
+    b = BufferedFunction(f)
+    for v in ([0.1, 0.2, 0.3], [1.0, -2.0, 0.5]):
+        got = b(np.array(v))
+        want = [np.asarray(o).ravel() for o in f(v)]
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)
+    first = b(np.zeros(3))
+    b(np.ones(3))
+    np.testing.assert_array_equal(first[1], np.zeros(3))    # copies, not views of the buffer
+    b.release()
+    np.testing.assert_allclose(b(np.ones(3))[1], 2 * np.ones(3))

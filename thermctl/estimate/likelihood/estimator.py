@@ -255,6 +255,7 @@ class LikelihoodEstimator:
                 if best is None or res.value < best[0].value:
                     best = (res, caught)
             res, caught = best
+            pb.release_buffers()        # the search keeps fitted problems; not their buffers
             for w in caught:
                 warnings.warn(w.message, w.category, stacklevel=2)
             self.problem_ = pb

@@ -51,7 +51,7 @@ from ...model import RBAR_V_PAPER, ConvectionParameters, ThermalModel
 from ...network import ThermalNetwork
 from ...spec import WALL_CLASSES, is_outdoor, wall_class
 from . import kalman
-from ._dense import dense_mtimes
+from ._dense import BufferedFunction, dense_mtimes
 from ..data import EstimationData
 from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
 from .options import LikelihoodOptions
@@ -676,8 +676,11 @@ class LikelihoodProblem:
         self._eta = eta
         self._nll = nll
         self.nll_fn = ca.Function("nll", [eta], [nll], ["eta"], ["nll"])
-        self.nll_grad_fn = ca.Function("nll_grad", [eta], [nll, ca.gradient(nll, eta)],
+        self.nll_grad_fn = ca.Function("nll_grad", [eta],
+                                       [nll, ca.densify(ca.gradient(nll, eta))],
                                        ["eta"], ["nll", "grad"])
+        self._nll_buf = BufferedFunction(self.nll_fn)
+        self._nll_grad_buf = BufferedFunction(self.nll_grad_fn)
         self.matrices_fn = ca.Function(
             "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change],
             ["eta"], ["A", "B", "Sigma", "R", "Phi", "Gamma", "Qd", "P", "S", "Kf", "X0",
@@ -699,8 +702,11 @@ class LikelihoodProblem:
             eta = self._eta
             self._kstep_expr = J = self._build_kstep(*self._kstep_parts)
             self.kstep_fn = ca.Function("kstep", [eta], [J], ["eta"], ["J"])
-            self.kstep_grad_fn = ca.Function("kstep_grad", [eta], [J, ca.gradient(J, eta)],
+            self.kstep_grad_fn = ca.Function("kstep_grad", [eta],
+                                             [J, ca.densify(ca.gradient(J, eta))],
                                              ["eta"], ["J", "grad"])
+            self._kstep_buf = BufferedFunction(self.kstep_fn)
+            self._kstep_grad_buf = BufferedFunction(self.kstep_grad_fn)
         return self._kstep_expr
 
     def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full):
@@ -732,23 +738,30 @@ class LikelihoodProblem:
         """Scalar errors in the k-step criterion."""
         return self.n_restarts * self.H * self.ny
 
+    def release_buffers(self) -> None:
+        """Free the evaluation buffers (tens of MB); the next evaluation makes them again."""
+        for name in ("_nll_buf", "_nll_grad_buf", "_kstep_buf", "_kstep_grad_buf"):
+            buf = getattr(self, name, None)
+            if buf is not None:
+                buf.release()
+
     def nll(self, eta) -> float:
         """Negative log-likelihood [-] (2π term included)."""
-        return float(self.nll_fn(np.asarray(eta, float)))
+        return float(self._nll_buf(eta)[0][0])
 
     def nll_grad(self, eta):
-        f, g = self.nll_grad_fn(np.asarray(eta, float))
-        return float(f), np.asarray(g, dtype=float).ravel()
+        f, g = self._nll_grad_buf(eta)
+        return float(f[0]), g
 
     def kstep(self, eta) -> float:
         """k-step criterion: sum of squared errors over horizons 1..H at every restart [K²]."""
         self._need_kstep()
-        return float(self.kstep_fn(np.asarray(eta, float)))
+        return float(self._kstep_buf(eta)[0][0])
 
     def kstep_grad(self, eta):
         self._need_kstep()
-        f, g = self.kstep_grad_fn(np.asarray(eta, float))
-        return float(f), np.asarray(g, dtype=float).ravel()
+        f, g = self._kstep_grad_buf(eta)
+        return float(f[0]), g
 
     def _need_kstep(self):
         if self._kstep is None:
