@@ -8,6 +8,7 @@ disk is :mod:`thermctl.outputs`' job.
 from __future__ import annotations
 
 import logging
+import os
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -259,7 +260,8 @@ class SplitOptions:
     combine : {"both", "sum", "either"}
         How the verdicts of an air path's two ends combine (:func:`thermctl.local.combine`).
     workers : int or None
-        Local processes (default every core).
+        Local processes (default every core); for a building identified as a whole, the
+        trial fits of each backward step side by side in as many threads.
     scheduler : str or None
         A Dask scheduler address (``tcp://host:8786``) to send the local problems to
         instead of local processes.
@@ -480,10 +482,10 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     if flows:
         ident.notes.append("directed flows (inputs, from the spec): " + ", ".join(
             f"{f.src} → {f.dst} ({f.fraction:g} × {f.rate_column})" for f in flows))
-    # --workers also runs the stability resamples of a whole building in parallel
-    if not local and (client is not None or opt.split.scheduler
-                      or (opt.split.workers and not opt.selection.stability)):
-        ident.notes.append(f"--workers/--scheduler apply to local problems only; this building "
+    # --workers runs a whole building's trial fits in threads and its stability
+    # resamples in processes; a scheduler serves local problems only
+    if not local and (client is not None or opt.split.scheduler):
+        ident.notes.append(f"--scheduler applies to local problems only; this building "
                            f"({len(meas.spec.measured_zones)} measured zones, --scale "
                            f"{opt.split.scale}) was identified as a whole in this process")
     return ident
@@ -642,7 +644,8 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
             sel = select_air_paths(spec, cal, progress=say, on_fit=on_fit,
-                                   final_criterion=opt.estimation.criterion, **sel_kw)
+                                   final_criterion=opt.estimation.criterion,
+                                   workers=_threads(opt), **sel_kw)
         if opt.selection.stability:
             from .stability import stability_selection
             stab = stability_selection(spec, cal, resamples=opt.selection.stability,
@@ -966,6 +969,12 @@ def _drop_unstable(spec, cal, opt, sel, stab, notes):
             ThermalNetwork(spec, kept), opt.estimation.criterion, solar=opt.estimation.solar,
             **_mass_options(opt)).fit(cal, init=init)
     return out
+
+
+def _threads(opt) -> int:
+    """Threads for a whole building's trial fits: ``--workers`` (default every core)."""
+    w = opt.split.workers
+    return max(1, int(os.cpu_count() or 1) if w is None else int(w))
 
 
 def _local_fit_options(opt) -> dict:

@@ -99,7 +99,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      holdout: float = 0.3, final_per_edge: bool = False,
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
-                     min_t: float = 0.0, **estimator_kwargs) -> SelectionResult:
+                     min_t: float = 0.0, workers: int = 1,
+                     **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -153,6 +154,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     min_t : float
         An edge's gain must also hold day by day: the t statistic of its daily likelihood
         gains (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
+    workers : int
+        Trial fits of a backward step side by side, in threads
+        (:meth:`LikelihoodScorer.fit_many`); the selection is the same as with 1.
     **estimator_kwargs
         Passed to every :class:`LikelihoodEstimator` (model options, solver...).
 
@@ -171,7 +175,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                               max_iter=max_iter, on_fit=on_fit, min_t=min_t, **estimator_kwargs)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
-                       margin=margin, progress=progress)
+                       margin=margin, progress=progress, workers=workers)
     est, cur = res.fitted, res.edges
     per_edge = {}
     if cur:

@@ -154,7 +154,7 @@ def identify(
                               "likelihood of the whole building), local (one small problem per "
                               "measured zone, in parallel) or auto (local above "
                               f"{_D.split.local_above} measured zones)."),
-    workers: int = typer.Option(None, min=1, help="Local problems: processes (default: every core)."),
+    workers: int = typer.Option(None, min=1, help="Local problems: processes; a whole building: trial fits side by side in threads (default: every core)."),
     scheduler: str = typer.Option(None, help="Local problems: a Dask scheduler address "
                                   "(tcp://HOST:8786) to run them on instead of local processes."),
     combine: str = typer.Option(_D.split.combine, help="Local problems: how an air path's "

@@ -144,7 +144,9 @@ class Scorer(Protocol):
         """Edge name → criterion change of adding each of ``rest`` to ``edges``, cheaply."""
 
     # optional: consistent(small, big) -> (bool, float, str): whether ``big`` (one more
-    # edge) is better than ``small`` consistently, a statistic and a few words on it
+    # edge) is better than ``small`` consistently, a statistic and a few words on it;
+    # fit_many(structures, warm=None, workers=1) -> [(fitted, value), ...]: fit() of each,
+    # side by side
 
 
 def candidate_pairs(spec, zones=None, include_unmeasured: bool = True,
@@ -185,7 +187,7 @@ def candidate_pairs(spec, zones=None, include_unmeasured: bool = True,
 
 def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(),
                  max_edges: int | None = None, margin: float = 10.0,
-                 progress=None) -> SearchResult:
+                 progress=None, workers: int = 1) -> SearchResult:
     """Forward selection and/or backward elimination of air paths by ``scorer``.
 
     Parameters
@@ -202,6 +204,9 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         to stay) [-].
     progress : callable, optional
         ``progress(message)`` after each decision.
+    workers : int
+        Trial fits of a backward step run this many at a time, when the scorer has a
+        ``fit_many(structures, warm=, workers=)`` (threads; the result is the serial one).
 
     Returns
     -------
@@ -280,13 +285,22 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     if direction in ("backward", "both"):
         while cur:
             trials = {}
-            for c in cur:
-                rest = [x for x in cur if x != c]
+            rests = {c.name: [x for x in cur if x != c] for c in cur}
+            todo = {}
+            for name, rest in rests.items():
                 key = frozenset(x.name for x in rest)
-                if key not in done:
-                    done[key] = scorer.fit(rest, warm=fitted)
-                f2, v2 = done[key]
-                trials[c.name] = (v2 - val, f2, v2)
+                if key not in done and key not in todo:
+                    todo[key] = rest
+            if todo:
+                # the trials are independent: a scorer that can fits them side by side
+                if workers > 1 and hasattr(scorer, "fit_many"):
+                    fits = scorer.fit_many(list(todo.values()), warm=fitted, workers=workers)
+                else:
+                    fits = [scorer.fit(rest, warm=fitted) for rest in todo.values()]
+                done.update(zip(todo, fits))
+            for name, rest in rests.items():
+                f2, v2 = done[frozenset(x.name for x in rest)]
+                trials[name] = (v2 - val, f2, v2)
             # an edge whose gain does not hold consistently goes first (the weakest such)
             weak, said = {}, {}
             for k, t in trials.items():

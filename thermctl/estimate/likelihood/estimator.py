@@ -8,8 +8,10 @@ everything a report needs.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field, fields
@@ -247,8 +249,7 @@ class LikelihoodEstimator:
                         if not lay.params[i].fixed:
                             eta0[i] = math.log(float(np.clip(r0, lay.params[i].lower,
                                                              lay.params[i].upper)))
-                with warnings.catch_warnings(record=True) as caught:
-                    warnings.simplefilter("always")
+                with _record_warnings() as caught:
                     res = minimize_criterion(pb, self.criterion, eta0, solver=self.solver,
                                              max_iter=self.max_iter, tol=self.tol)
                 tried.append(({"rbar_v": r0}, res.value))
@@ -311,3 +312,16 @@ class LikelihoodEstimator:
         pb = self.problem_for(data)
         with single_thread_blas():
             return pb.nll(self.eta_) / max(pb.n_obs, 1)
+
+
+@contextlib.contextmanager
+def _record_warnings():
+    """``warnings.catch_warnings(record=True)`` in the main thread. In another thread the
+    warnings go straight to the process-wide filters: a context there would restore them
+    out of order with the main thread's (``catch_warnings`` is not thread-safe)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield []
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught

