@@ -34,3 +34,21 @@ def test_threaded_backward_search_equals_serial(floor):
         assert s2.estimator.params_[k] == pytest.approx(v, rel=1e-10), k
     # the threads left the process-wide warnings machinery as they found it
     assert warnings.showwarning is show and warnings.filters == filters
+
+
+def test_profiles_in_threads_equal_serial(floor):
+    from thermctl.estimate.likelihood import LikelihoodEstimator, identifiability
+    from thermctl.network import ThermalNetwork
+    spec, meas = floor
+    net = ThermalNetwork(spec, [("r240", "r243", 2.8), ("r241", "r247", 5.8)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = LikelihoodEstimator(net, max_iter=80).fit(meas)
+    show, filters = warnings.showwarning, list(warnings.filters)
+    reps = [identifiability(est, threads=t) for t in (1, 2)]
+    assert warnings.showwarning is show and warnings.filters == filters
+    for name in ("rbar_v", "tau0"):
+        a, b = reps[0].intervals[name], reps[1].intervals[name]
+        assert a.method == b.method == "profile"
+        assert (a.lower, a.upper) == pytest.approx((b.lower, b.upper), rel=1e-12)
+    assert reps[0].verdicts == reps[1].verdicts

@@ -1,4 +1,5 @@
-"""One BLAS thread for the small dense linear algebra of thermctl.
+"""One BLAS thread for the small dense linear algebra of thermctl (and the other
+process-wide settings that threads and repeated evaluations need: the heap, warnings).
 
 The matrices here are small (tens to a few hundred states): BLAS threads only fight
 each other and other processes. Measured on the 2-core CI machine under load, 150
@@ -22,10 +23,11 @@ import ctypes
 import os
 import sys
 import threading
+import warnings
 
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["single_thread_blas", "keep_heap"]
+__all__ = ["single_thread_blas", "keep_heap", "ignore_warnings", "record_warnings"]
 
 _CONTROLLER = None
 _HEAP_SET = False
@@ -76,3 +78,39 @@ def single_thread_blas():
     if _CONTROLLER is None:
         _CONTROLLER = ThreadpoolController()
     return _CONTROLLER.limit(limits=1)
+
+
+# ---------------------------------------------------------------------- warnings in threads
+def _worker_thread() -> bool:
+    return threading.current_thread() is not threading.main_thread()
+
+
+@contextlib.contextmanager
+def ignore_warnings(*categories):
+    """``warnings.simplefilter("ignore", c)`` for each category inside, in the main thread.
+
+    In any other thread: nothing. The filters are process-wide and ``catch_warnings`` is not
+    thread-safe: two threads' contexts that close out of order leave the process with the
+    other's filters and ``showwarning`` for good. Code that runs fits in threads holds one
+    such context in the main thread around them (:meth:`LikelihoodScorer.fit_many`).
+    """
+    if _worker_thread():
+        yield
+        return
+    with warnings.catch_warnings():
+        for c in categories:
+            warnings.simplefilter("ignore", c)
+        yield
+
+
+@contextlib.contextmanager
+def record_warnings():
+    """``warnings.catch_warnings(record=True)`` (every warning recorded) in the main thread;
+    in another thread an empty list, and the warnings go to the process-wide filters (see
+    :func:`ignore_warnings`)."""
+    if _worker_thread():
+        yield []
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught

@@ -1074,7 +1074,7 @@ def _intervals(gb, opt, notes, cal=None):
         notes.append(f"{len(names) - 1} per-edge R̄_v: Wald intervals instead of profiles "
                      "(a profile costs about 10 fits per parameter)")
     try:
-        ida = identifiability(gb, params=tuple(names), method=method)
+        ida = identifiability(gb, params=tuple(names), method=method, threads=_threads(opt))
     except (EstimationError, np.linalg.LinAlgError) as exc:
         notes.append(f"no intervals: {exc}")
         return None

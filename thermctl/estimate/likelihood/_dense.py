@@ -388,6 +388,9 @@ class BufferedFunction:
     glibc's largest threshold for keeping freed memory, so each call page-faulted it in again:
     16 000 faults and 244 → 199 ms a call with a :meth:`casadi.Function.buffer`.
 
+    Each thread gets its own buffers, so that threads may evaluate the same problem at once
+    (the profile intervals do).
+
     Parameters
     ----------
     fn : casadi.Function
@@ -397,28 +400,33 @@ class BufferedFunction:
     def __init__(self, fn: ca.Function):
         self.fn = fn
         self._lock = threading.Lock()
-        self._buf = None
+        self._bufs = {}
+
+    def _make(self):
+        fb, run = self.fn.buffer()
+        arg = np.zeros(self.fn.nnz_in(0))
+        res = [np.zeros(self.fn.nnz_out(i)) for i in range(self.fn.n_out())]
+        fb.set_arg(0, memoryview(arg))
+        for i, r in enumerate(res):
+            fb.set_res(i, memoryview(r))
+        return fb, run, arg, res
 
     def __call__(self, x) -> list[np.ndarray]:
         """Outputs at ``x`` as flat numpy arrays (column-major), copies."""
+        tid = threading.get_ident()
         with self._lock:
-            if self._buf is None:
-                fb, run = self.fn.buffer()
-                arg = np.zeros(self.fn.nnz_in(0))
-                res = [np.zeros(self.fn.nnz_out(i)) for i in range(self.fn.n_out())]
-                fb.set_arg(0, memoryview(arg))
-                for i, r in enumerate(res):
-                    fb.set_res(i, memoryview(r))
-                self._buf = (fb, run, arg, res)
-            fb, run, arg, res = self._buf
-            arg[:] = np.asarray(x, dtype=float).ravel()
-            run()
-            if fb.ret() != 0:
-                raise RuntimeError(f"CasADi function {self.fn.name()} failed (return code "
-                                   f"{fb.ret()})")
-            return [r.copy() for r in res]
+            buf = self._bufs.get(tid)
+            if buf is None:
+                buf = self._bufs[tid] = self._make()
+        fb, run, arg, res = buf
+        arg[:] = np.asarray(x, dtype=float).ravel()
+        run()
+        if fb.ret() != 0:
+            raise RuntimeError(f"CasADi function {self.fn.name()} failed (return code "
+                               f"{fb.ret()})")
+        return [r.copy() for r in res]
 
     def release(self) -> None:
         """Free the buffers (a fitted problem kept for later use need not hold them)."""
         with self._lock:
-            self._buf = None
+            self._bufs = {}

@@ -8,17 +8,15 @@ everything a report needs.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import threading
 import time
 import warnings
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..._blas import single_thread_blas
+from ..._blas import record_warnings, single_thread_blas
 from ...errors import BoundWarning, DataError, EstimationError
 from ...model import RBAR_V_PAPER, ConvectionParameters
 from ...network import ThermalNetwork
@@ -249,7 +247,7 @@ class LikelihoodEstimator:
                         if not lay.params[i].fixed:
                             eta0[i] = math.log(float(np.clip(r0, lay.params[i].lower,
                                                              lay.params[i].upper)))
-                with _record_warnings() as caught:
+                with record_warnings() as caught:
                     res = minimize_criterion(pb, self.criterion, eta0, solver=self.solver,
                                              max_iter=self.max_iter, tol=self.tol)
                 tried.append(({"rbar_v": r0}, res.value))
@@ -313,15 +311,3 @@ class LikelihoodEstimator:
         with single_thread_blas():
             return pb.nll(self.eta_) / max(pb.n_obs, 1)
 
-
-@contextlib.contextmanager
-def _record_warnings():
-    """``warnings.catch_warnings(record=True)`` in the main thread. In another thread the
-    warnings go straight to the process-wide filters: a context there would restore them
-    out of order with the main thread's (``catch_warnings`` is not thread-safe)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield []
-        return
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        yield caught

@@ -8,16 +8,14 @@ ranks the candidates it could add cheaply (:meth:`LikelihoodScorer.screen`).
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import threading
-import warnings
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..._blas import single_thread_blas
+from ..._blas import ignore_warnings, single_thread_blas
 from ...errors import BoundWarning, ConvergenceWarning, EstimationError
 from ...model import ConvectionParameters
 from ...network import ThermalNetwork
@@ -132,10 +130,8 @@ class LikelihoodScorer:
         if workers <= 1 or len(structures) < 2:
             return [self.fit(s, warm=warm) for s in structures]
         # the warnings filters are process-wide and catch_warnings is not thread-safe:
-        # one context here, none in the threads (see _quiet)
-        with single_thread_blas(), warnings.catch_warnings():
-            warnings.simplefilter("ignore", BoundWarning)
-            warnings.simplefilter("ignore", ConvergenceWarning)
+        # one context here, none in the threads (see ignore_warnings)
+        with single_thread_blas(), ignore_warnings(BoundWarning, ConvergenceWarning):
             with ThreadPoolExecutor(max_workers=workers) as pool:
                 return list(pool.map(lambda s: self.fit(s, warm=warm), structures))
 
@@ -252,7 +248,7 @@ class LikelihoodScorer:
         net = ThermalNetwork(self.spec, [c.pair + (c.d,) for c in edges])
         est = LikelihoodEstimator(net, per_edge=True, fix=fix, tol=self.tol,
                                   max_iter=max_iter or self.max_iter, **self.kw)
-        with _quiet():
+        with ignore_warnings(BoundWarning, ConvergenceWarning):
             est.fit(self.train, init=init)
         with self._count:
             self.n_fits += 1
@@ -306,19 +302,6 @@ class LikelihoodScorer:
             return est.aic_
         # held-back likelihood, scaled like -2 log L so the deltas read like AIC/BIC
         return 2.0 * est.score(self.test) * est.problem_for(self.test).n_obs
-
-
-@contextlib.contextmanager
-def _quiet():
-    """Bound and convergence warnings of the selection's fits off; in a worker thread of
-    :meth:`LikelihoodScorer.fit_many` nothing (its caller holds the one context)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", BoundWarning)
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        yield
 
 
 def _key(c) -> str:

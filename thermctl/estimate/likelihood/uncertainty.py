@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import logging
 import math
-import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2, norm
 
-from ..._blas import single_thread_blas
+from ..._blas import ignore_warnings, single_thread_blas
 from ...errors import ConvergenceWarning, EstimationError
 from ...model import ConvectionParameters
 from .optimize import minimize_criterion
@@ -284,8 +284,7 @@ def profile_likelihood(problem, eta, name: str, level: float = 0.9, *, step: flo
                     break
                 trial = cur.copy()
                 trial[i] = x_new
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
+                with ignore_warnings(ConvergenceWarning):
                     r = minimize_criterion(problem, "likelihood", trial, solver=solver, free=free,
                                            max_iter=max_iter)
                 d = r.value - f_hat
@@ -333,7 +332,8 @@ def _crossing(xs, ds, thr, bound):
 
 
 def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
-                    method: str = "profile", robust: bool = True) -> "IdentifiabilityReport":
+                    method: str = "profile", robust: bool = True,
+                    threads: int = 1) -> "IdentifiabilityReport":
     """Intervals and a verdict in plain words for R̄_v, τ0 (and so C_v).
 
     Parameters
@@ -349,6 +349,8 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
     robust : bool
         Widen both kinds of interval by the sandwich variance ratio (see
         :func:`wald_intervals`).
+    threads : int
+        Profiles computed side by side (each is a chain of fits; the result is the same).
 
     Returns
     -------
@@ -363,11 +365,17 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
     intervals = dict(wald)
     names = [n for n in params if n in lay.names and not lay.params[lay.index(n)].fixed]
     if method == "profile":
-        for n in names:
-            infl = wald[n].inflation if n in wald else 1.0
-            intervals[n] = profile_likelihood(pb, eta, n, level, nll_hat=estimator.nll_,
-                                              solver=getattr(estimator, "solver", "lbfgs"),
-                                              inflation=infl)
+        def profile(n):
+            return profile_likelihood(pb, eta, n, level, nll_hat=estimator.nll_,
+                                      solver=getattr(estimator, "solver", "lbfgs"),
+                                      inflation=wald[n].inflation if n in wald else 1.0)
+        if threads > 1 and len(names) > 1:
+            # one warnings context here, none in the threads (see ignore_warnings)
+            with single_thread_blas(), ignore_warnings(ConvergenceWarning), \
+                    ThreadPoolExecutor(max_workers=min(threads, len(names))) as pool:
+                intervals.update(zip(names, pool.map(profile, names)))
+        else:
+            intervals.update((n, profile(n)) for n in names)
     verdicts = {}
     for n in names:
         verdicts[n] = _verdict(intervals[n], pb)
