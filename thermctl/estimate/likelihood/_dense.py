@@ -65,39 +65,65 @@ def _blocks(X, rows: int, cols: int, count: int):
     return [X[:, i * cols:(i + 1) * cols] for i in range(count)]
 
 
-class _Matmul(ca.Callback):
-    """``C = A B`` for dense ``A`` (n×k) and ``B`` (k×m) by ``numpy.matmul``."""
+def _view(buf, shape):
+    return np.frombuffer(buf, dtype=float).reshape(shape, order="F")
 
-    def __init__(self, n: int, k: int, m: int):
-        ca.Callback.__init__(self)
-        self.n, self.k, self.m = n, k, m
-        self.construct(f"matmul_{n}x{k}x{m}", {"enable_fd": False})
+
+class _DenseCallback(ca.Callback):
+    """A numpy function of dense matrices in a CasADi graph, with derivatives of every order.
+
+    Subclasses set ``self.ins`` (the input shapes) and ``self.out`` (the output shape)
+    before :meth:`_construct`, compute into the output in :meth:`compute`, and build their
+    derivatives from such callbacks again in ``get_forward`` / ``get_reverse``.
+    """
+
+    ins: tuple = ()
+    out: tuple = (0, 0)
+
+    def _construct(self, name: str):
+        self.construct(name, {"enable_fd": False})
 
     def get_n_in(self):
-        return 2
+        return len(self.ins)
 
     def get_n_out(self):
         return 1
 
     def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, self.k) if i == 0 else ca.Sparsity.dense(self.k, self.m)
+        return ca.Sparsity.dense(*self.ins[i])
 
     def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(self.n, self.m)
+        return ca.Sparsity.dense(*self.out)
 
     def has_eval_buffer(self):
         return True
 
     def eval_buffer(self, arg, res):
         # CasADi stores dense matrices column-major
-        a = np.frombuffer(arg[0], dtype=float).reshape((self.n, self.k), order="F")
-        b = np.frombuffer(arg[1], dtype=float).reshape((self.k, self.m), order="F")
-        out = np.frombuffer(res[0], dtype=float).reshape((self.n, self.m), order="F")
-        np.matmul(a, b, out=out)
+        self.compute(*(_view(a, sh) for a, sh in zip(arg, self.ins)), _view(res[0], self.out))
         return 0
+
+    def compute(self, *args):
+        raise NotImplementedError
 
     def has_forward(self, nfwd):
         return True
+
+    def has_reverse(self, nadj):
+        return True
+
+
+class _Matmul(_DenseCallback):
+    """``C = A B`` for dense ``A`` (n×k) and ``B`` (k×m) by ``numpy.matmul``."""
+
+    def __init__(self, n: int, k: int, m: int):
+        ca.Callback.__init__(self)
+        self.n, self.k, self.m = n, k, m
+        self.ins, self.out = ((n, k), (k, m)), (n, m)
+        self._construct(f"matmul_{n}x{k}x{m}")
+
+    def compute(self, a, b, out):
+        np.matmul(a, b, out=out)
 
     def get_forward(self, nfwd, name, inames, onames, opts):
         n, k, m = self.n, self.k, self.m
@@ -108,9 +134,6 @@ class _Matmul(ca.Callback):
         dAB = dense_mtimes(ca.vertcat(*_blocks(dA, n, k, nfwd)), B)
         dC = ca.horzcat(*[dAB[i * n:(i + 1) * n, :] for i in range(nfwd)]) + dense_mtimes(A, dB)
         return ca.Function(name, [A, B, C, dA, dB], [dC], inames, onames, opts)
-
-    def has_reverse(self, nadj):
-        return True
 
     def get_reverse(self, nadj, name, inames, onames, opts):
         n, k, m = self.n, self.k, self.m
@@ -225,11 +248,7 @@ def _adj_np(F, Xb, restart, L, out):
         Gb[:, :, j - 1] += Hb
 
 
-def _view(buf, shape):
-    return np.frombuffer(buf, dtype=float).reshape(shape, order="F")
-
-
-class _Recursion(ca.Callback):
+class _Recursion(_DenseCallback):
     """``X = rec(F, GZ, starts)`` (:func:`linear_recursion`).
 
     Derivatives: forward ``Ẋ = rec(F, ĠZ + Ḟ X, ṡtarts)``; reverse ``ḠZ = adj(F, X̄)``,
@@ -245,37 +264,16 @@ class _Recursion(ca.Callback):
             if s >= 0:
                 sel[c, s] = 1.0
         self.sel = ca.DM(sel)
-        self.construct(f"recursion_{n}x{L}x{self.M}_{id(self):x}", {"enable_fd": False})
+        self.ins, self.out = ((n, n), (n, L * self.M), (n, nseg)), (n, L * self.M)
+        self._construct(f"recursion_{n}x{L}x{self.M}_{id(self):x}")
 
-    def get_n_in(self):
-        return 3
-
-    def get_n_out(self):
-        return 1
-
-    def get_sparsity_in(self, i):
-        cols = (self.n, self.L * self.M, self.nseg)[i]
-        return ca.Sparsity.dense(self.n, cols)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(self.n, self.L * self.M)
-
-    def has_eval_buffer(self):
-        return True
-
-    def eval_buffer(self, arg, res):
-        n, LM = self.n, self.L * self.M
-        _rec_np(_view(arg[0], (n, n)), _view(arg[1], (n, LM)), _view(arg[2], (n, self.nseg)),
-                self.restart, self.L, _view(res[0], (n, LM)))
-        return 0
+    def compute(self, F, GZ, S, out):
+        _rec_np(F, GZ, S, self.restart, self.L, out)
 
     def _syms(self):
         n, LM = self.n, self.L * self.M
         return (ca.MX.sym("F", n, n), ca.MX.sym("GZ", n, LM), ca.MX.sym("S", n, self.nseg),
                 ca.MX.sym("X", n, LM))
-
-    def has_forward(self, nfwd):
-        return True
 
     def get_forward(self, nfwd, name, inames, onames, opts):
         n, LM, ns = self.n, self.L * self.M, self.nseg
@@ -289,9 +287,6 @@ class _Recursion(ca.Callback):
                for i in range(nfwd)]
         return ca.Function(name, [F, GZ, S, X, dF, dG, dS], [ca.horzcat(*out)], inames, onames,
                            opts)
-
-    def has_reverse(self, nadj):
-        return True
 
     def get_reverse(self, nadj, name, inames, onames, opts):
         n, LM, M = self.n, self.L * self.M, self.M
@@ -310,7 +305,7 @@ class _Recursion(ca.Callback):
                            inames, onames, opts)
 
 
-class _Adjoint(ca.Callback):
+class _Adjoint(_DenseCallback):
     """``Ḡ = adj(F, X̄)``: the reverse sweep of :class:`_Recursion`, linear in ``X̄``.
 
     Derivatives: forward ``Ḡ̇ = adj(F, Ẋ̄ + Ḟᵀ Ḡ)``; reverse ``ν = rec(F, Ḡ̄, 0)``,
@@ -322,35 +317,15 @@ class _Adjoint(ca.Callback):
         self.n, self.L, self.restart = n, L, list(restart)
         self.M = len(restart)
         self.nseg = max(max(self.restart) + 1, 1)
-        self.construct(f"recursion_adj_{n}x{L}x{self.M}_{id(self):x}", {"enable_fd": False})
+        self.ins, self.out = ((n, n), (n, L * self.M)), (n, L * self.M)
+        self._construct(f"recursion_adj_{n}x{L}x{self.M}_{id(self):x}")
 
-    def get_n_in(self):
-        return 2
-
-    def get_n_out(self):
-        return 1
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, self.n if i == 0 else self.L * self.M)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(self.n, self.L * self.M)
-
-    def has_eval_buffer(self):
-        return True
-
-    def eval_buffer(self, arg, res):
-        n, LM = self.n, self.L * self.M
-        _adj_np(_view(arg[0], (n, n)), _view(arg[1], (n, LM)), self.restart, self.L,
-                _view(res[0], (n, LM)))
-        return 0
+    def compute(self, F, Xb, out):
+        _adj_np(F, Xb, self.restart, self.L, out)
 
     def _syms(self):
         n, LM = self.n, self.L * self.M
         return ca.MX.sym("F", n, n), ca.MX.sym("Xb", n, LM), ca.MX.sym("Gb", n, LM)
-
-    def has_forward(self, nfwd):
-        return True
 
     def get_forward(self, nfwd, name, inames, onames, opts):
         n, LM = self.n, self.L * self.M
@@ -361,9 +336,6 @@ class _Adjoint(ca.Callback):
                         + dense_mtimes(dF[:, i * n:(i + 1) * n].T, Gb), self.restart, self.L)
                for i in range(nfwd)]
         return ca.Function(name, [F, Xb, Gb, dF, dX], [ca.horzcat(*out)], inames, onames, opts)
-
-    def has_reverse(self, nadj):
-        return True
 
     def get_reverse(self, nadj, name, inames, onames, opts):
         n, LM = self.n, self.L * self.M
