@@ -124,3 +124,8 @@ def test_buffered_function_equals_call_and_is_reused():
     np.testing.assert_array_equal(first[1], np.zeros(3))    # copies, not views of the buffer
     b.release()
     np.testing.assert_allclose(b(np.ones(3))[1], 2 * np.ones(3))
+    # several inputs, a matrix among them (column-major like CasADi)
+    M = ca.MX.sym("M", 2, 3)
+    g = BufferedFunction(ca.Function("g", [x, M], [ca.densify(ca.mtimes(M, x))]))
+    Mv = np.arange(6.0).reshape(2, 3)
+    np.testing.assert_allclose(g(np.array([1.0, 2.0, 3.0]), Mv)[0], Mv @ [1.0, 2.0, 3.0])

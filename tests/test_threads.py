@@ -52,3 +52,8 @@ def test_profiles_in_threads_equal_serial(floor):
         assert a.method == b.method == "profile"
         assert (a.lower, a.upper) == pytest.approx((b.lower, b.upper), rel=1e-12)
     assert reps[0].verdicts == reps[1].verdicts
+    # the Wald step: Hessian columns and day-block scores side by side
+    for name, a in reps[0].wald.items():
+        b = reps[1].wald[name]
+        assert (a.lower, a.upper, a.inflation) == pytest.approx((b.lower, b.upper, b.inflation),
+                                                                rel=1e-12), name

@@ -353,7 +353,7 @@ class _Adjoint(_DenseCallback):
 
 # ---------------------------------------------------------------------- evaluation
 class BufferedFunction:
-    """A CasADi Function of one dense vector, called on buffers that live with it.
+    """A CasADi Function of dense inputs, called on buffers that live with it.
 
     ``casadi.Function.__call__`` allocates the work vector on every call. For the
     likelihood's gradient that is 67 MB on the twin house (119 states, 49 parameters), above
@@ -366,7 +366,7 @@ class BufferedFunction:
     Parameters
     ----------
     fn : casadi.Function
-        One dense input; outputs dense (``casadi.densify`` them).
+        Dense inputs and outputs (``casadi.densify`` them).
     """
 
     def __init__(self, fn: ca.Function):
@@ -376,22 +376,24 @@ class BufferedFunction:
 
     def _make(self):
         fb, run = self.fn.buffer()
-        arg = np.zeros(self.fn.nnz_in(0))
+        args = [np.zeros(self.fn.nnz_in(i)) for i in range(self.fn.n_in())]
         res = [np.zeros(self.fn.nnz_out(i)) for i in range(self.fn.n_out())]
-        fb.set_arg(0, memoryview(arg))
+        for i, a in enumerate(args):
+            fb.set_arg(i, memoryview(a))
         for i, r in enumerate(res):
             fb.set_res(i, memoryview(r))
-        return fb, run, arg, res
+        return fb, run, args, res
 
-    def __call__(self, x) -> list[np.ndarray]:
-        """Outputs at ``x`` as flat numpy arrays (column-major), copies."""
+    def __call__(self, *xs) -> list[np.ndarray]:
+        """Outputs at the inputs ``xs`` as flat numpy arrays (column-major), copies."""
         tid = threading.get_ident()
         with self._lock:
             buf = self._bufs.get(tid)
             if buf is None:
                 buf = self._bufs[tid] = self._make()
-        fb, run, arg, res = buf
-        arg[:] = np.asarray(x, dtype=float).ravel()
+        fb, run, args, res = buf
+        for a, x in zip(args, xs, strict=True):
+            a[:] = np.asarray(x, dtype=float).ravel(order="F")
         run()
         if fb.ret() != 0:
             raise RuntimeError(f"CasADi function {self.fn.name()} failed (return code "

@@ -41,11 +41,13 @@ import copy
 import dataclasses
 import logging
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from ..._blas import single_thread_blas
 from ...errors import DataError, EstimationError
 from ...model import RBAR_V_PAPER, ConvectionParameters, ThermalModel
 from ...network import ThermalNetwork
@@ -780,7 +782,7 @@ class LikelihoodProblem:
         H = np.asarray(ca.densify(self._hess[criterion](np.asarray(eta, float))))
         return 0.5 * (H + H.T)
 
-    def block_scores(self, eta, block: float = 86400.0) -> np.ndarray:
+    def block_scores(self, eta, block: float = 86400.0, threads: int = 1) -> np.ndarray:
         """Gradients of the likelihood's contributions of consecutive time blocks.
 
         Parameters
@@ -788,6 +790,8 @@ class LikelihoodProblem:
         eta : array_like
         block : float
             Block length [s] (blocks follow the data rows from the first sample).
+        threads : int
+            Blocks computed side by side.
 
         Returns
         -------
@@ -799,16 +803,20 @@ class LikelihoodProblem:
             # CasADi differentiate the Riccati callback column by column)
             wcol = ca.MX.sym("w", self.L * self.M)
             f = ca.dot(wcol, self._col_terms.T)
-            self._hess["weighted"] = ca.Function("wnll_grad", [self._eta, wcol],
-                                                 [ca.gradient(f, self._eta)])
+            self._hess["weighted"] = BufferedFunction(ca.Function(
+                "wnll_grad", [self._eta, wcol], [ca.densify(ca.gradient(f, self._eta))]))
         bid = self._block_ids(block)
         eta = np.asarray(eta, float)
         ids = np.unique(bid[bid >= 0])
-        G = np.empty((len(ids), len(self.layout)))
-        for r, b in enumerate(ids):
-            G[r] = np.asarray(self._hess["weighted"](eta, (bid == b).astype(float)),
-                              dtype=float).ravel()
-        return G
+
+        def score(b):
+            return self._hess["weighted"](eta, (bid == b).astype(float))[0]
+        if threads > 1 and len(ids) > 1:
+            with single_thread_blas(), ThreadPoolExecutor(max_workers=threads) as pool:
+                rows = list(pool.map(score, ids))
+        else:
+            rows = [score(b) for b in ids]
+        return np.array(rows).reshape(len(ids), len(self.layout))
 
     def _block_ids(self, block: float) -> np.ndarray:
         """Block number (data row // rows per block) of every layout column; -1 where the

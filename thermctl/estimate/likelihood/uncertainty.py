@@ -117,7 +117,8 @@ class IdentifiabilityReport:
         return "\n".join(lines)
 
 
-def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step: float = 1e-4):
+def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step: float = 1e-4,
+               threads: int = 1):
     """Hessian of the criterion in ``eta`` by central differences of its exact gradient.
 
     Parameters
@@ -129,6 +130,8 @@ def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step:
     criterion : {"likelihood", "kstep"}
     rel_step : float
         Step in ``eta`` [-] (log coordinates: a relative step of the parameter).
+    threads : int
+        Columns computed side by side.
 
     Returns
     -------
@@ -138,19 +141,25 @@ def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step:
     free = problem.layout.free() if free is None else np.asarray(free, bool)
     idx = np.flatnonzero(free)
     grad = problem.nll_grad if criterion == "likelihood" else problem.kstep_grad
-    H = np.zeros((len(idx), len(idx)))
+
+    def column(i):
+        h = rel_step * max(1.0, abs(eta[i]))
+        ep, em = eta.copy(), eta.copy()
+        ep[i] += h
+        em[i] -= h
+        return (grad(ep)[1][idx] - grad(em)[1][idx]) / (2 * h)
     with single_thread_blas():
-        for j, i in enumerate(idx):
-            h = rel_step * max(1.0, abs(eta[i]))
-            ep, em = eta.copy(), eta.copy()
-            ep[i] += h
-            em[i] -= h
-            H[:, j] = (grad(ep)[1][idx] - grad(em)[1][idx]) / (2 * h)
+        if threads > 1 and len(idx) > 1:
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                cols = list(pool.map(column, idx))
+        else:
+            cols = [column(i) for i in idx]
+    H = np.column_stack(cols) if cols else np.zeros((0, 0))
     return 0.5 * (H + H.T)
 
 
 def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: bool = True,
-                   block: float = 86400.0) -> tuple[dict, list]:
+                   block: float = 86400.0, threads: int = 1) -> tuple[dict, list]:
     """Wald intervals of every free parameter and the weak Hessian directions.
 
     Parameters at a bound are left out of the inversion (treated as fixed).
@@ -177,7 +186,7 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
     use = free & np.array([p.name not in at_bound for p in lay.params])
     idx = np.flatnonzero(use)
     if H is None:
-        H = hessian_fd(problem, eta, use)
+        H = hessian_fd(problem, eta, use, threads=threads)
     z = norm.ppf(0.5 + level / 2)
     out = {}
     weak = []
@@ -195,7 +204,7 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
         var = np.diag(Hinv).copy()
         infl = np.ones(len(idx))
         if robust:
-            G = problem.block_scores(eta, block)[:, idx]
+            G = problem.block_scores(eta, block, threads=threads)[:, idx]
             nb = G.shape[0]
             if nb >= 3:
                 Gc = G - G.mean(axis=0)
@@ -350,7 +359,8 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
         Widen both kinds of interval by the sandwich variance ratio (see
         :func:`wald_intervals`).
     threads : int
-        Profiles computed side by side (each is a chain of fits; the result is the same).
+        Profiles, Hessian columns and block scores computed side by side (the result is
+        the same).
 
     Returns
     -------
@@ -361,7 +371,7 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
     estimator._check_fitted()
     pb, eta = estimator.problem_, estimator.eta_
     lay = pb.layout
-    wald, weak = wald_intervals(pb, eta, level, robust=robust)
+    wald, weak = wald_intervals(pb, eta, level, robust=robust, threads=threads)
     intervals = dict(wald)
     names = [n for n in params if n in lay.names and not lay.params[lay.index(n)].fixed]
     if method == "profile":
