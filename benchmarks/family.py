@@ -28,7 +28,8 @@ for ``rc`` plants and the finite-volume plant itself for ``fd``), and the time o
 
 Every row is appended as JSON to ``benchmarks/results/family-runs.jsonl`` when it is done
 (``--save``), so an interrupted study keeps what it finished; ``--table`` rebuilds the
-tables from that file.
+tables from that file, with the last run of every case (a re-run replaces what it
+re-measured; runs with an option, " [t]" or " [fast]", in a table of their own).
 
 Usage::
 
@@ -154,6 +155,14 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
+def latest(rows):
+    """The last run of every (study, case, seed): a re-run replaces what it re-measured."""
+    last = {}
+    for r in rows:
+        last[(r["study"], r["case"], r["seed"])] = r
+    return list(last.values())
+
+
 def table(rows, study):
     rows = [r for r in rows if r["study"] == study]
     head = (f"| case | seed | zones (meas) | recall | false | R̄v | err | 90 % interval | cover "
@@ -206,10 +215,16 @@ def main(argv=None):
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
-        rows = [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()]
+        rows = latest(json.loads(line) for line in RUNS.read_text().splitlines()
+                      if line.strip())
+        # the defaults, then the runs with an option (case names with " [...]")
+        plain = [r for r in rows if " [" not in r["case"]]
+        opts = [r for r in rows if " [" in r["case"]]
         out = []
         for study in ("factors", "family"):
-            out += [f"## {study}", "", table(rows, study), ""]
+            out += [f"## {study}", "", table(plain, study), ""]
+            if any(r["study"] == study for r in opts):
+                out += [f"## {study}, with an option", "", table(opts, study), ""]
         text = "\n".join(out)
         (RESULTS / "family.txt").write_text(text + "\n")
         print(text)
