@@ -332,7 +332,7 @@ def chunked_recursion(F, GZ, starts, restart, L: int):
     X : casadi.MX, shape (n, L·M)
         ``x`` at every step, in the chunk layout.
     """
-    if any(r < 0 for r in restart[:1]):
+    if not len(restart) or restart[0] < 0:
         raise EstimationError("chunk layout: the first chunk must start a segment")
     return linear_recursion(F, GZ, starts, restart, L)
 
