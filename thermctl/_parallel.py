@@ -1,14 +1,30 @@
-"""Run independent tasks on local processes: the one pool of the local problems and the
-stability resamples."""
+"""Run independent tasks on local processes (the one pool of the local problems and the
+stability resamples) or on threads (a whole building's trial fits and intervals)."""
 
 from __future__ import annotations
 
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 
+from ._blas import single_thread_blas
 from .errors import EstimationError
 
-__all__ = ["run_tasks"]
+__all__ = ["run_tasks", "thread_map"]
+
+
+def thread_map(fn, items, threads: int = 1) -> list:
+    """``[fn(x) for x in items]``, ``threads`` at a time in threads, with one BLAS thread.
+
+    For CasADi evaluations and BLAS, which release the GIL (two likelihood gradients in two
+    threads: 4.4 s against 8.2 s one after the other). ``fn`` must not enter a
+    ``warnings.catch_warnings`` context (not thread-safe; see
+    :func:`thermctl._blas.ignore_warnings`): the caller holds one around the call.
+    """
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    with single_thread_blas(), ThreadPoolExecutor(max_workers=min(threads, len(items))) as pool:
+        return list(pool.map(fn, items))
 
 
 def run_tasks(fn, tasks, *, workers: int | None = None, order=None, on_done=None) -> list:

@@ -41,13 +41,12 @@ import copy
 import dataclasses
 import logging
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..._blas import single_thread_blas
+from ..._parallel import thread_map
 from ...errors import DataError, EstimationError
 from ...model import RBAR_V_PAPER, ConvectionParameters, ThermalModel
 from ...network import ThermalNetwork
@@ -811,12 +810,7 @@ class LikelihoodProblem:
 
         def score(b):
             return self._hess["weighted"](eta, (bid == b).astype(float))[0]
-        if threads > 1 and len(ids) > 1:
-            with single_thread_blas(), ThreadPoolExecutor(max_workers=threads) as pool:
-                rows = list(pool.map(score, ids))
-        else:
-            rows = [score(b) for b in ids]
-        return np.array(rows).reshape(len(ids), len(self.layout))
+        return np.array(thread_map(score, ids, threads)).reshape(len(ids), len(self.layout))
 
     def _block_ids(self, block: float) -> np.ndarray:
         """Block number (data row // rows per block) of every layout column; -1 where the

@@ -11,11 +11,11 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from ..._blas import ignore_warnings, single_thread_blas
+from ..._parallel import thread_map
 from ...errors import BoundWarning, ConvergenceWarning, EstimationError
 from ...model import ConvectionParameters
 from ...network import ThermalNetwork
@@ -127,13 +127,10 @@ class LikelihoodScorer:
         against 8.2 s one after the other). The results are those of the serial loop, in
         its order; each fit is deterministic with one BLAS thread.
         """
-        if workers <= 1 or len(structures) < 2:
-            return [self.fit(s, warm=warm) for s in structures]
         # the warnings filters are process-wide and catch_warnings is not thread-safe:
         # one context here, none in the threads (see ignore_warnings)
-        with single_thread_blas(), ignore_warnings(BoundWarning, ConvergenceWarning):
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                return list(pool.map(lambda s: self.fit(s, warm=warm), structures))
+        with ignore_warnings(BoundWarning, ConvergenceWarning):
+            return thread_map(lambda s: self.fit(s, warm=warm), structures, workers)
 
     def screen(self, edges, rest, fitted) -> dict:
         """Edge name → criterion change of adding each of ``rest``, everything else held."""

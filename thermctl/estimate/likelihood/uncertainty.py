@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import logging
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2, norm
 
 from ..._blas import ignore_warnings, single_thread_blas
+from ..._parallel import thread_map
 from ...errors import ConvergenceWarning, EstimationError
 from ...model import ConvectionParameters
 from .optimize import minimize_criterion
@@ -149,11 +149,7 @@ def hessian_fd(problem, eta, free=None, criterion: str = "likelihood", rel_step:
         em[i] -= h
         return (grad(ep)[1][idx] - grad(em)[1][idx]) / (2 * h)
     with single_thread_blas():
-        if threads > 1 and len(idx) > 1:
-            with ThreadPoolExecutor(max_workers=threads) as pool:
-                cols = list(pool.map(column, idx))
-        else:
-            cols = [column(i) for i in idx]
+        cols = thread_map(column, idx, threads)
     H = np.column_stack(cols) if cols else np.zeros((0, 0))
     return 0.5 * (H + H.T)
 
@@ -379,13 +375,9 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
             return profile_likelihood(pb, eta, n, level, nll_hat=estimator.nll_,
                                       solver=getattr(estimator, "solver", "lbfgs"),
                                       inflation=wald[n].inflation if n in wald else 1.0)
-        if threads > 1 and len(names) > 1:
-            # one warnings context here, none in the threads (see ignore_warnings)
-            with single_thread_blas(), ignore_warnings(ConvergenceWarning), \
-                    ThreadPoolExecutor(max_workers=min(threads, len(names))) as pool:
-                intervals.update(zip(names, pool.map(profile, names)))
-        else:
-            intervals.update((n, profile(n)) for n in names)
+        # one warnings context here, none in the threads (see ignore_warnings)
+        with ignore_warnings(ConvergenceWarning):
+            intervals.update(zip(names, thread_map(profile, names, threads)))
     verdicts = {}
     for n in names:
         verdicts[n] = _verdict(intervals[n], pb)
