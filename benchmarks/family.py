@@ -156,10 +156,11 @@ def _fmt(v, spec):
 
 
 def latest(rows):
-    """The last run of every (study, case, seed): a re-run replaces what it re-measured."""
+    """The last run of every (study, case, seed, days): a re-run replaces what it
+    re-measured."""
     last = {}
     for r in rows:
-        last[(r["study"], r["case"], r["seed"])] = r
+        last[(r["study"], r["case"], r["seed"], r["days"])] = r
     return list(last.values())
 
 
