@@ -64,6 +64,10 @@ def keep_heap() -> bool:
     return bool(ok)
 
 
+def _worker_thread() -> bool:
+    return threading.current_thread() is not threading.main_thread()
+
+
 def single_thread_blas():
     """Context manager limiting BLAS to one thread.
 
@@ -73,7 +77,7 @@ def single_thread_blas():
     """
     global _CONTROLLER
     keep_heap()
-    if threading.current_thread() is not threading.main_thread():
+    if _worker_thread():
         return contextlib.nullcontext()
     if _CONTROLLER is None:
         _CONTROLLER = ThreadpoolController()
@@ -81,10 +85,6 @@ def single_thread_blas():
 
 
 # ---------------------------------------------------------------------- warnings in threads
-def _worker_thread() -> bool:
-    return threading.current_thread() is not threading.main_thread()
-
-
 @contextlib.contextmanager
 def ignore_warnings(*categories):
     """``warnings.simplefilter("ignore", c)`` for each category inside, in the main thread.

@@ -310,4 +310,3 @@ class LikelihoodEstimator:
         pb = self.problem_for(data)
         with single_thread_blas():
             return pb.nll(self.eta_) / max(pb.n_obs, 1)
-
