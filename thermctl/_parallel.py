@@ -9,7 +9,15 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_compl
 from ._blas import single_thread_blas
 from .errors import EstimationError
 
-__all__ = ["run_tasks", "thread_map"]
+__all__ = ["run_tasks", "thread_map", "worker_count"]
+
+
+def worker_count(workers: int | None) -> int:
+    """``workers``, or every core when it is None."""
+    workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    if workers < 1:
+        raise EstimationError(f"workers must be >= 1, found {workers}")
+    return workers
 
 
 def thread_map(fn, items, threads: int = 1) -> list:
@@ -50,9 +58,7 @@ def run_tasks(fn, tasks, *, workers: int | None = None, order=None, on_done=None
         The results in the order of ``tasks``.
     """
     n = len(tasks)
-    workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if workers < 1:
-        raise EstimationError(f"workers must be >= 1, found {workers}")
+    workers = worker_count(workers)
     order = list(range(n)) if order is None else list(order)
     results = {}
 

@@ -8,7 +8,6 @@ disk is :mod:`thermctl.outputs`' job.
 from __future__ import annotations
 
 import logging
-import os
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -973,8 +972,8 @@ def _drop_unstable(spec, cal, opt, sel, stab, notes):
 
 def _threads(opt) -> int:
     """Threads for a whole building's trial fits: ``--workers`` (default every core)."""
-    w = opt.split.workers
-    return max(1, int(os.cpu_count() or 1) if w is None else int(w))
+    from ._parallel import worker_count
+    return worker_count(opt.split.workers)
 
 
 def _local_fit_options(opt) -> dict:

@@ -48,16 +48,7 @@ def dense_mtimes(A, B):
         raise ValueError(f"dense_mtimes: inner dimensions differ ({A.shape} @ {B.shape})")
     if n == 0 or m == 0 or k == 0:
         return ca.MX(n, m)
-    return _callback(n, k, m)(ca.densify(A), ca.densify(B))
-
-
-def _callback(n: int, k: int, m: int) -> "_Matmul":
-    key = (n, k, m)
-    with _LOCK:
-        cb = _CACHE.get(key)
-        if cb is None:
-            cb = _CACHE[key] = _Matmul(n, k, m)
-    return cb
+    return _cached(("mm", n, k, m), _Matmul)(ca.densify(A), ca.densify(B))
 
 
 def _blocks(X, rows: int, cols: int, count: int):
@@ -169,8 +160,7 @@ def linear_recursion(F, GZ, starts, restart, L: int):
     -------
     casadi.MX, shape (n, L·M)
     """
-    n, M = F.shape[0], len(restart)
-    cb = _cached(("rec", n, L, tuple(restart), starts.shape[1]), _Recursion)
+    cb = _cached(("rec", F.shape[0], L, tuple(restart), starts.shape[1]), _Recursion)
     return cb(ca.densify(F), ca.densify(GZ), ca.densify(starts))
 
 
@@ -182,6 +172,7 @@ def _adjoint(F, Xb, restart, L: int):
 
 
 def _cached(key, cls):
+    """The callback ``cls(*key[1:])``, made once per key."""
     with _LOCK:
         cb = _CACHE.get(key)
         if cb is None:

@@ -741,9 +741,10 @@ class LikelihoodProblem:
 
     def release_buffers(self) -> None:
         """Free the evaluation buffers (tens of MB); the next evaluation makes them again."""
-        for name in ("_nll_buf", "_nll_grad_buf", "_kstep_buf", "_kstep_grad_buf"):
-            buf = getattr(self, name, None)
-            if buf is not None:
+        bufs = [getattr(self, n, None) for n in ("_nll_buf", "_nll_grad_buf", "_kstep_buf",
+                                                   "_kstep_grad_buf")]
+        for buf in bufs + list(self._hess.values()):
+            if isinstance(buf, BufferedFunction):
                 buf.release()
 
     def nll(self, eta) -> float:

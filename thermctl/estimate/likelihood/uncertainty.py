@@ -378,6 +378,7 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
         # one warnings context here, none in the threads (see ignore_warnings)
         with ignore_warnings(ConvergenceWarning):
             intervals.update(zip(names, thread_map(profile, names, threads)))
+    pb.release_buffers()            # one set per thread used above; the fit keeps none
     verdicts = {}
     for n in names:
         verdicts[n] = _verdict(intervals[n], pb)
