@@ -57,3 +57,40 @@ def test_profiles_in_threads_equal_serial(floor):
         b = reps[1].wald[name]
         assert (a.lower, a.upper, a.inflation) == pytest.approx((b.lower, b.upper, b.inflation),
                                                                 rel=1e-12), name
+
+
+def test_first_fit_started_ahead_gives_the_serial_search(floor):
+    """The search's first fit, started in a thread before the search (what identify does
+    while it decides the gain model), is taken by the search: same selection, same count,
+    and no second fit of that structure."""
+    from thermctl._blas import ignore_warnings, single_thread_blas
+    from thermctl.errors import BoundWarning, ConvergenceWarning, EstimationError
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+    from thermctl.structure.search import as_candidates
+    spec, meas = floor
+    cands = [("r240", "r243"), ("r241", "r247"), ("r242", "r244")]
+    kw = dict(candidates=cands, direction="backward", max_iter=60, fast_gain=True)
+    fits0 = []
+    serial = select_air_paths(spec, meas, on_fit=fits0.append, **kw)
+    ahead = LikelihoodScorer(spec, meas, max_iter=60, fast_gain=True)
+    show, filters = warnings.showwarning, list(warnings.filters)
+    with single_thread_blas(), ignore_warnings(BoundWarning, ConvergenceWarning):
+        fut = ahead.speculate(as_candidates(spec, cands))
+        fut.result()
+    assert warnings.showwarning is show and warnings.filters == filters
+    assert ahead.n_fits == 0            # counted by the search that takes it, once
+    fits = []
+    got = select_air_paths(spec, meas, ahead=ahead, on_fit=fits.append, **kw)
+    assert got.edges == serial.edges and got.n_fits == serial.n_fits and fits == fits0
+    np.testing.assert_allclose([st.value for st in got.path], [st.value for st in serial.path],
+                               rtol=1e-12)
+    # the search's first fit is the very object fitted ahead: it was not refitted
+    assert got.path[0].value == fut.result()[1]
+    for k, v in serial.estimator.params_.items():
+        assert got.estimator.params_[k] == pytest.approx(v, rel=1e-10), k
+    # fits started with other options are refused, not silently used
+    other = LikelihoodScorer(spec, meas, max_iter=60)           # no fast gain
+    with single_thread_blas(), ignore_warnings(BoundWarning, ConvergenceWarning):
+        other.speculate(as_candidates(spec, cands[:1])).result()
+    with pytest.raises(EstimationError, match="other options"):
+        select_air_paths(spec, meas, ahead=other, **kw)

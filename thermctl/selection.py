@@ -99,7 +99,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      holdout: float = 0.3, final_per_edge: bool = False,
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
-                     min_t: float = 0.0, workers: int = 1,
+                     min_t: float = 0.0, workers: int = 1, ahead=None,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -157,6 +157,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     workers : int
         Trial fits of a backward step side by side, in threads
         (:meth:`LikelihoodScorer.fit_many`); the selection is the same as with 1.
+    ahead : LikelihoodScorer, optional
+        Fits started ahead (:meth:`LikelihoodScorer.speculate`) with the same options and
+        data: the search takes their results instead of fitting again
+        (:meth:`LikelihoodScorer.adopt` raises if the options differ).
     **estimator_kwargs
         Passed to every :class:`LikelihoodEstimator` (model options, solver...).
 
@@ -173,6 +177,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     by_name = {c.name: c for c in cands}
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
                               max_iter=max_iter, on_fit=on_fit, min_t=min_t, **estimator_kwargs)
+    if ahead is not None:
+        scorer.adopt(ahead)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
                        margin=margin, progress=progress, workers=workers)
