@@ -245,3 +245,27 @@ def test_resamples_shorter_than_three_days_are_called_out():
     rs = [StabilityResample(0, [f"2011-01-2{i}" for i in range(1, 7)], [])]
     _stability_short_note(StabilityResult({}, rs, 0.5, 2, 0, 0.0, 0.0), notes)
     assert len(notes) == 1
+
+
+def test_a_likelihood_on_blanked_days_warns_nothing():
+    """A resample blanks whole days; building its likelihood must not warn per empty row
+    (it printed "Mean of empty slice" once per fit of every resample)."""
+    import warnings
+
+    from thermctl.data import read_measurements
+    from thermctl.estimate.likelihood import LikelihoodEstimator
+    from thermctl.network import ThermalNetwork
+    from thermctl.testbed import generate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=4, seed=1)
+    meas = read_measurements(tb.data, tb.spec)
+    days = sorted(set(meas.frame.index.date))
+    fr = mask_days(meas.frame, days[1:3])
+    est = LikelihoodEstimator(ThermalNetwork(tb.spec))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        pb = est.make_problem(fr)
+        f = pb.nll(pb.layout.eta0())
+    assert np.isfinite(f)
+    assert pb.n_obs < 0.6 * len(fr) * len(tb.spec.measured_zones)    # the blanked days do not count

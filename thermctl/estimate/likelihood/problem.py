@@ -140,8 +140,15 @@ class LikelihoodProblem:
         if opt.supply_temperature == "midpoint" and N > 1:
             nxt = np.vstack([Y[1:], Y[-1:]])
             Tbar = np.where(np.isfinite(nxt), 0.5 * (Y + nxt), Y)
-        with np.errstate(invalid="ignore"):
-            Tref = np.nanmean(Tbar, axis=1) if self.ny else np.full(N, 20.0)
+        if self.ny:
+            # the mean of the finite readings per row, NaN where none is (a gap, or a
+            # resample's dropped days): np.nanmean would warn on every such row
+            ok = np.isfinite(Tbar)
+            cnt = ok.sum(axis=1)
+            Tref = np.where(cnt > 0, np.where(ok, Tbar, 0.0).sum(axis=1) / np.maximum(cnt, 1),
+                            np.nan)
+        else:
+            Tref = np.full(N, 20.0)
         heat = Q.copy()
         # for k-step predictions the supply heat uses the *predicted* temperature:
         # heat(T̂) = heat(T̄) − ms·cp·(T̂ − T̄) (explicit over a step; C_z/(ms cp) ≫ dt)
