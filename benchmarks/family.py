@@ -29,7 +29,8 @@ for ``rc`` plants and the finite-volume plant itself for ``fd``), and the time o
 Every row is appended as JSON to ``benchmarks/results/family-runs.jsonl`` when it is done
 (``--save``), so an interrupted study keeps what it finished; ``--table`` rebuilds the
 tables from that file, with the last run of every case (a re-run replaces what it
-re-measured; runs with an option, " [t]" or " [fast]", in a table of their own).
+re-measured; runs with an option, " [t]", " [fast]" or " [all:holdout]", in a table of
+their own).
 
 Usage::
 
@@ -51,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from thermctl.data import read_measurements
-from thermctl.identify import EstimationOptions, IdentifyOptions, identify
+from thermctl.identify import EstimationOptions, IdentifyOptions, SelectionOptions, identify
 from thermctl.model import ThermalModel
 from thermctl.testbed import disturbances, generate
 from thermctl.validate import minimum_flows, relative_error, step_response_matrix
@@ -87,9 +88,9 @@ LAYOUTS = {
 }
 
 
-def run_case(study, name, kwargs, seed, days, estimation=None):
-    """Generate, identify with the defaults (``estimation``: EstimationOptions fields to
-    change), score; one dict."""
+def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
+    """Generate, identify with the defaults (``estimation``, ``selection``:
+    EstimationOptions, SelectionOptions fields to change), score; one dict."""
     t0 = time.perf_counter()
     gen_kw = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     weekend = disturbances.HOURLY_WEEKEND
@@ -113,12 +114,15 @@ def run_case(study, name, kwargs, seed, days, estimation=None):
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
     if estimation:
         row["estimation"] = dict(estimation)
+    if selection:
+        row["selection"] = dict(selection)
     t1 = time.perf_counter()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ident = identify(meas, IdentifyOptions(
-                estimation=EstimationOptions(**(estimation or {}))))
+                estimation=EstimationOptions(**(estimation or {})),
+                selection=SelectionOptions(**(selection or {}))))
     except Exception as exc:            # noqa: BLE001 - a failing run is a result
         row["error"] = f"{type(exc).__name__}: {str(exc)[:120]}"
         return row
@@ -213,6 +217,9 @@ def main(argv=None):
                     help="identify's innovation distribution (student: case names get ' [t]')")
     ap.add_argument("--fast-gain", action="store_true",
                     help="identify with a fast gain per zone (case names get ' [fast]')")
+    ap.add_argument("--selection", metavar="CANDIDATES:CRITERION",
+                    help="identify's --candidates and --selection-criterion, e.g. all:holdout "
+                         "(case names get ' [all:holdout]')")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
@@ -246,7 +253,12 @@ def main(argv=None):
             name, est["innovations"] = name + " [t]", args.innovations
         if args.fast_gain:
             name, est["fast_gain"] = name + " [fast]", True
-        row = run_case(study, name, kw, seed, days, estimation=est)
+        sel = {}
+        if args.selection:
+            cand, _, crit = args.selection.partition(":")
+            sel = dict(candidates=cand, criterion=crit or "bic")
+            name += f" [{args.selection}]"
+        row = run_case(study, name, kw, seed, days, estimation=est, selection=sel)
         rows.append(row)
         print(json.dumps(row), flush=True)
         if args.save:
