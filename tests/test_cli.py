@@ -211,6 +211,13 @@ def test_misfit_note_only_when_innovations_are_far_from_white():
     bad = SimpleNamespace(intervals={"rbar_v": SimpleNamespace(inflation=246.0)})
     _misfit_note(bad, IdentifyOptions(), notes)
     assert len(notes) == 1 and "variance ratio 246" in notes[0] and "--selection-criterion holdout" in notes[0]
+    assert "--candidates all" in notes[0]
+    # chosen on held-back days already: the note does not send the user there again
+    held = IdentifyOptions()
+    held.selection.criterion = "holdout"
+    _misfit_note(bad, held, notes)
+    assert len(notes) == 2 and "variance ratio 246" in notes[1]
+    assert "held-back days" in notes[1] and "--selection-criterion" not in notes[1]
 
 
 @pytest.mark.slow

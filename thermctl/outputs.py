@@ -293,7 +293,9 @@ def write_outputs(ident: Identification, outdir) -> dict:
         save_model(ident.model, tmp / "model.json")
         sid = ident.structure
         if sid is not None:
-            how = ("SIN candidates, kept by " + ident.options.selection.criterion.upper()
+            sel = ident.options.selection
+            how = (("SIN" if sel.candidates == "sin" else sel.candidates) + " candidates, kept by "
+                   + sel.criterion.upper()
                    if ident.selection is not None else f"{sid.method}, rule={sid.rule}")
             save_figure(plot_network(sid, network=ident.model.network,
                                      title=f"{ident.model.network.spec.name}: identified network ({how})"),
