@@ -170,18 +170,18 @@ def latest(rows):
 
 def table(rows, study):
     rows = [r for r in rows if r["study"] == study]
-    head = (f"| case | seed | zones (meas) | recall | false | R̄v | err | 90 % interval | cover "
-            f"| step | cond | 3R2C truth | s |")
-    lines = [head, "|" + "---|" * 13]
+    head = (f"| case | seed | days | zones (meas) | recall | false | R̄v | err | 90 % interval "
+            f"| cover | step | cond | 3R2C truth | s |")
+    lines = [head, "|" + "---|" * 14]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['case']} | {r['seed']} | {r['zones']} ({r['measured']}) | "
-                         f"failed: {r['error']} |" + " |" * 9)
+            lines.append(f"| {r['case']} | {r['seed']} | {r['days']:g} | {r['zones']} "
+                         f"({r['measured']}) | failed: {r['error']} |" + " |" * 9)
             continue
         n_true = len(r["true"])
         iv = r.get("interval")
         lines.append(
-            f"| {r['case']} | {r['seed']} | {r['zones']} ({r['measured']}) | "
+            f"| {r['case']} | {r['seed']} | {r['days']:g} | {r['zones']} ({r['measured']}) | "
             f"{r['recall_hits']}/{n_true} | {r['false']} | {_fmt(r['rbar_v'], '.3g')} | "
             f"{_fmt(r['rbar_err'], '.0%')} | "
             + (f"[{iv[0]:.3g}, {iv[1]:.3g}]" if iv else "—") + " | "
@@ -194,7 +194,7 @@ def table(rows, study):
         errs = [r["rbar_err"] for r in ok if r["rbar_err"] is not None]
         cov = [r["covers"] for r in ok if "covers" in r]
         lines.append(
-            f"| **all {len(ok)}** | | | {sum(r['recall_hits'] for r in ok) / max(n_true, 1):.2f} | "
+            f"| **all {len(ok)}** | | | | {sum(r['recall_hits'] for r in ok) / max(n_true, 1):.2f} | "
             f"{np.mean([r['false'] for r in ok]):.2f}/bld | | "
             f"med {_fmt(float(np.median(errs)) if errs else None, '.0%')} | | "
             f"{sum(cov)}/{len(cov)} | med {np.median([r['step_err'] for r in ok]):.1%} | "
