@@ -94,3 +94,33 @@ def test_first_fit_started_ahead_gives_the_serial_search(floor):
         other.speculate(as_candidates(spec, cands[:1])).result()
     with pytest.raises(EstimationError, match="other options"):
         select_air_paths(spec, meas, ahead=other, **kw)
+
+
+def test_a_fit_started_ahead_stops_when_cancelled(floor):
+    """A wrong guess does not hold a core: the fit ends at its next likelihood evaluation,
+    is not counted, and the search fits afresh (the serial result)."""
+    import time
+
+    from thermctl._blas import ignore_warnings, single_thread_blas
+    from thermctl.errors import BoundWarning, ConvergenceWarning
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer, _Stopped
+    from thermctl.structure.search import as_candidates
+    spec, meas = floor
+    cands = [("r240", "r243"), ("r241", "r247"), ("r242", "r244")]
+    ahead = LikelihoodScorer(spec, meas, max_iter=60, fast_gain=True)
+    cs = as_candidates(spec, cands)
+    with single_thread_blas(), ignore_warnings(BoundWarning, ConvergenceWarning):
+        fut = ahead.speculate(cs)
+        time.sleep(0.5)                       # the fit is under way
+        t0 = time.perf_counter()
+        ahead.cancel_ahead()
+        waited = time.perf_counter() - t0
+    assert fut.done() and isinstance(fut.exception(), _Stopped)
+    assert waited < 2.0                       # one evaluation, not the rest of the fit
+    assert ahead.n_fits == 0
+    # nothing is left to adopt: the search fits that structure itself
+    kw = dict(candidates=cands, direction="backward", max_iter=60, fast_gain=True)
+    got = select_air_paths(spec, meas, ahead=ahead, **kw)
+    serial = select_air_paths(spec, meas, **kw)
+    assert got.edges == serial.edges and got.n_fits == serial.n_fits
+    assert got.path[0].value == pytest.approx(serial.path[0].value, rel=1e-12)

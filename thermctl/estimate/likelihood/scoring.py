@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
@@ -100,6 +100,7 @@ class LikelihoodScorer:
         self.n_fits = 0
         self._count = threading.Lock()
         self._ahead = {}            # structure (frozenset of names) -> Future of _fit
+        self._stops = {}            # the same keys -> Event that stops that fit
         data = as_estimation_data(data, ThermalNetwork(spec, ()))
         if criterion == "holdout":
             cut = int(round(len(data) * (1.0 - holdout)))
@@ -137,11 +138,23 @@ class LikelihoodScorer:
         :func:`thermctl._blas.ignore_warnings`).
         """
         edges = list(edges)
+        key = frozenset(c.name for c in edges)
+        stop = self._stops[key] = threading.Event()
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="thermctl-ahead")
-        fut = pool.submit(self._fit, edges, count=False)
+        fut = pool.submit(self._fit, edges, count=False, stop=stop)
         pool.shutdown(wait=False)
-        self._ahead[frozenset(c.name for c in edges)] = fut
+        self._ahead[key] = fut
         return fut
+
+    def cancel_ahead(self) -> None:
+        """Stop the fits started ahead at their next likelihood evaluation (a wrong guess
+        should not hold a core: on the demo the unneeded fit took longer than the decision
+        it was started beside), wait for their threads, and forget them."""
+        for stop in self._stops.values():
+            stop.set()
+        futs = list(self._ahead.values())
+        self._ahead, self._stops = {}, {}
+        wait(futs)
 
     def adopt(self, other: "LikelihoodScorer") -> None:
         """Take the fits ``other`` started ahead (:meth:`speculate`); ``other`` must ask the
@@ -153,7 +166,8 @@ class LikelihoodScorer:
             raise EstimationError("adopt: the fits started ahead used other options or data "
                                   "than this search's")
         self._ahead.update(other._ahead)
-        other._ahead = {}
+        self._stops.update(other._stops)
+        other._ahead, other._stops = {}, {}
 
     def fit_many(self, structures, warm=None, workers: int = 1) -> list:
         """:meth:`fit` of every structure in ``structures``, ``workers`` at a time.
@@ -277,10 +291,12 @@ class LikelihoodScorer:
                                                             if c.parallel else "")
 
     # ---- internals --------------------------------------------------------------------
-    def _fit(self, edges, init=None, fix=None, max_iter=None, count=True):
+    def _fit(self, edges, init=None, fix=None, max_iter=None, count=True, stop=None):
         net = ThermalNetwork(self.spec, [c.pair + (c.d,) for c in edges])
         est = LikelihoodEstimator(net, per_edge=True, fix=fix, tol=self.tol,
                                   max_iter=max_iter or self.max_iter, **self.kw)
+        if stop is not None:
+            est.make_problem = _stoppable(est.make_problem, stop)
         with ignore_warnings(BoundWarning, ConvergenceWarning):
             est.fit(self.train, init=init)
         out = est, self.value(est)
@@ -340,6 +356,26 @@ class LikelihoodScorer:
             return est.aic_
         # held-back likelihood, scaled like -2 log L so the deltas read like AIC/BIC
         return 2.0 * est.score(self.test) * est.problem_for(self.test).n_obs
+
+
+class _Stopped(Exception):
+    """A fit started ahead was stopped (:meth:`LikelihoodScorer.cancel_ahead`)."""
+
+
+def _stoppable(make_problem, stop):
+    """``make_problem`` whose problems raise :class:`_Stopped` at the next likelihood
+    evaluation once ``stop`` is set."""
+    def make(*args, **kwargs):
+        pb = make_problem(*args, **kwargs)
+        fg = pb.nll_grad
+
+        def nll_grad(eta):
+            if stop.is_set():
+                raise _Stopped
+            return fg(eta)
+        pb.nll_grad = nll_grad
+        return pb
+    return make
 
 
 def _same_data(a, b) -> bool:
