@@ -190,7 +190,7 @@ def identify(
       thermctl identify data.csv --building building.yaml --out out/
       thermctl identify data.csv -b building.yaml --criterion simulation   # the paper's method
       thermctl identify data.csv -b building.yaml --candidates all --no-solar
-      thermctl identify data.csv -b building.yaml --candidates all --selection-criterion holdout   # a poor fit (the notes say so)
+      thermctl identify data.csv -b building.yaml --candidates all --selection-criterion holdout
       thermctl identify data.csv -b building.yaml --scale local --workers 2    # big buildings
       thermctl identify data.csv -b building.yaml --scheduler tcp://10.0.0.5:8786
     """
