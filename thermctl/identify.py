@@ -1191,17 +1191,17 @@ def _misfit_note(ida, opt, notes):
         (v for k, v in ida.intervals.items() if k.startswith("rbar_v")), None)
     if iv is None or iv.inflation <= 4.0:
         return
+    head = (f"the model's one-step innovations are far from white (sandwich/Hessian variance "
+            f"ratio {iv.inflation:.0f} for R̄_v): ")
     if opt.selection.criterion == "holdout":
         notes.append(
-            f"the model's one-step innovations are far from white (sandwich/Hessian variance "
-            f"ratio {iv.inflation:.0f} for R̄_v): its intervals are widened by that much; the "
-            "air paths were kept for what they bring to held-back days, which does not rest on "
-            "the likelihood being right. Check the spec too (zone heat capacities, missing "
-            "internal mass) — measured on the twin house in benchmarks/results/twinhouse.txt.")
+            head + "its intervals are widened by that much; the air paths were kept for what "
+            "they bring to held-back days, which does not rest on the likelihood being right. "
+            "Check the spec too (zone heat capacities, missing internal mass) — measured on the "
+            "twin house in benchmarks/results/twinhouse.txt.")
         return
     notes.append(
-        f"the model's one-step innovations are far from white (sandwich/Hessian variance ratio "
-        f"{iv.inflation:.0f} for R̄_v): the likelihood overstates the evidence, so "
+        head + "the likelihood overstates the evidence, so "
         f"{opt.selection.criterion.upper()} differences of edges are inflated about that much "
         f"and edges kept with a margin of {opt.selection.margin:g} may be spurious. Check the "
         "structure on held-back days, over every pair: --candidates all "

@@ -142,7 +142,8 @@ class LikelihoodProblem:
             Tbar = np.where(np.isfinite(nxt), 0.5 * (Y + nxt), Y)
         if self.ny:
             # the mean of the finite readings per row, NaN where none is (a gap, or a
-            # resample's dropped days): np.nanmean would warn on every such row
+            # resample's dropped days): np.nanmean would warn on every such row, and a
+            # warnings filter around it is not thread-safe (problems are built in threads)
             ok = np.isfinite(Tbar)
             cnt = ok.sum(axis=1)
             Tref = np.where(cnt > 0, np.where(ok, Tbar, 0.0).sum(axis=1) / np.maximum(cnt, 1),
