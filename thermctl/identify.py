@@ -15,7 +15,7 @@ import numpy as np
 
 from . import __version__
 from .data import MIN_CALIBRATION_DAYS, Measurements
-from .errors import BoundWarning, DataError, EstimationError
+from .errors import BoundWarning, ConvergenceWarning, DataError, EstimationError
 from .model import ConvectionParameters, ThermalModel
 from .network import ThermalNetwork, air_path_name
 from .structure import StructureIdentifier
@@ -28,6 +28,7 @@ logger = logging.getLogger(__name__)
 
 CRITERIA = ("likelihood", "kstep", "simulation")
 SELECTIONS = ("auto", "model", "scores")
+INPUT_TIMINGS = ("auto", "held", "centred")
 
 
 def _one_of(stage, name, value, allowed):
@@ -203,6 +204,17 @@ class EstimationOptions:
         whole-building selection; the other whole-building fits (the local path's refit,
         the paper's rule with a Kalman criterion) leave it out unless it is True. Ignored
         by ``criterion="simulation"``.
+    input_timing : {"auto", "held", "centred"}
+        How each row's inputs (heat, supply air, solar, boundary temperatures) act on the
+        step that starts at its stamp (:meth:`thermctl.data.Measurements.centred_inputs`):
+        ``held`` as logged (instantaneous samples a controller holds: the testbed),
+        ``centred`` the mean of the row and the next (values that are means over the
+        interval ending at the stamp: meters, the twin house's 10-min averages). ``auto``
+        (default, Kalman criteria): the conduction-only model is fitted both ways and
+        ``centred`` is used when it improves BIC by more than ``selection.margin``
+        (measured: the twin house −14 168, the Pugh Hall testbed +247, i.e. ``held``);
+        the local path decides on the sum over a few local problems. With
+        ``criterion="simulation"`` ``auto`` is ``held``.
     """
 
     criterion: str = "likelihood"
@@ -216,9 +228,11 @@ class EstimationOptions:
     wall_factors: bool = False
     innovations: str = "gaussian"
     fast_gain: object = "auto"
+    input_timing: str = "auto"
 
     def check(self):
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
+        _one_of("estimation", "input_timing", self.input_timing, INPUT_TIMINGS)
         _one_of("estimation", "innovations", self.innovations, ("gaussian", "student"))
         if self.fast_gain not in ("auto", True, False):
             raise DataError(f"identify option estimation.fast_gain must be 'auto', True or "
@@ -470,6 +484,9 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     opt = options or IdentifyOptions()
     opt.check()
     cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
+    meas, opt, timing_note, off = _resolve_input_timing(meas, cal, opt, progress)
+    if meas.input_timing == "centred":
+        cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
     flows = meas.spec.flows
     local = False
     if opt.paper or opt.selection_method == "scores":
@@ -477,7 +494,9 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     elif opt.is_local(meas.spec):
         ident, local = _identify_local(meas, cal, val, opt, progress, client), True
     else:
-        ident = _identify_greybox(meas, cal, val, opt, progress)
+        ident = _identify_greybox(meas, cal, val, opt, progress, off=off)
+    if timing_note:
+        ident.notes.insert(0, timing_note)
     if flows:
         ident.notes.append("directed flows (inputs, from the spec): " + ", ".join(
             f"{f.src} → {f.dst} ({f.fraction:g} × {f.rate_column})" for f in flows))
@@ -576,7 +595,7 @@ def _paper_structure(cal, net, st, notes):
     return sid.fit(cal.frame, net)
 
 
-def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
+def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification:
     """SIN candidates → backward elimination by BIC → grey-box fit with intervals."""
     from .selection import select_air_paths
     from .structure.search import candidate_pairs
@@ -637,7 +656,7 @@ def _identify_greybox(meas, cal, val, opt, progress) -> Identification:
         # model-based selection does for small buildings)
         direction = "backward" if sid is not None and start is None else "both"
         first = cands if direction == "backward" else list(start or ())
-        opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first)
+        opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off)
         sel_kw = dict(candidates=cands, direction=direction, margin=opt.selection.margin,
                       start=start or (), **_scorer_options(opt))
         with warnings.catch_warnings():
@@ -1017,7 +1036,7 @@ def _scorer_options(opt) -> dict:
                 solar=opt.estimation.solar, **_mass_options(opt))
 
 
-def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first):
+def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
     """``(opt, ahead)``: the gain model decided (:func:`_resolve_fast_gain`) and, beside it
     in a second thread, the selection's first fit (the structure ``first``) with the fast
     gain, in a scorer the search adopts when the gain is kept (else None).
@@ -1039,7 +1058,7 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first):
     from .structure.search import as_candidates
     est = opt.estimation
     if est.fast_gain != "auto" or not first or _threads(opt) < 2:
-        return _resolve_fast_gain(spec, (), cal, opt, notes, progress), None
+        return _resolve_fast_gain(spec, (), cal, opt, notes, progress, off), None
     on = dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=True))
     # the fit's thread sees the process-wide warnings filters and BLAS limit: the main
     # thread holds both until it ends
@@ -1048,7 +1067,7 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first):
         stack.enter_context(ignore_warnings(BoundWarning, ConvergenceWarning))
         ahead = LikelihoodScorer(spec, cal, **_scorer_options(on))
         fut = ahead.speculate(as_candidates(spec, first))
-        opt = _resolve_fast_gain(spec, (), cal, opt, notes, progress)
+        opt = _resolve_fast_gain(spec, (), cal, opt, notes, progress, off)
         if opt.estimation.fast_gain is not True:
             ahead.cancel_ahead()            # stops at its next evaluation
             return opt, None
@@ -1056,11 +1075,94 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first):
     return opt, ahead
 
 
-def _resolve_fast_gain(spec, edges, cal, opt, notes, progress=None):
+def _conduction_only_fit(spec, cal, opt):
+    """The conduction-only likelihood fit without fast gain that the gain-model decision
+    starts from (:func:`_resolve_fast_gain`), on ``cal``."""
+    import dataclasses
+    from .estimate.likelihood import LikelihoodEstimator
+    est = opt.estimation
+    off_opt = dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=False))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BoundWarning)
+        return LikelihoodEstimator(ThermalNetwork(spec), solar=est.solar, per_edge=False,
+                                   **_mass_options(off_opt)).fit(cal)
+
+
+#: Local problems the local path's ``input_timing="auto"`` is decided on (evenly spaced).
+TIMING_PROBLEMS = 4
+
+
+def _resolve_input_timing(meas, cal, opt, progress=None):
+    """``(meas, opt, note, off)``: ``estimation.input_timing`` decided, and the data with it.
+
+    ``auto`` fits the conduction-only model on the calibration days with the inputs as
+    logged and centred (:meth:`thermctl.data.Measurements.centred_inputs`) and centres
+    them when BIC improves by more than ``selection.margin``; a building identified by
+    local problems sums the two BICs over :data:`TIMING_PROBLEMS` of them (the start of
+    their searches). ``off`` is the whole-building conduction-only fit on the chosen data
+    (the gain-model decision reuses it), else None. ``note`` is empty unless ``auto``
+    decided.
+    """
+    import dataclasses
+    est = opt.estimation
+
+    def done(timing, note="", off=None):
+        m = meas.centred_inputs() if timing == "centred" else meas
+        return m, dataclasses.replace(opt, estimation=dataclasses.replace(
+            est, input_timing=timing)), note, off
+
+    if est.input_timing != "auto":
+        return done(est.input_timing)
+    if est.criterion == "simulation":
+        return done("held")
+    ccal = meas.centred_inputs().split(calibration=opt.calibration,
+                                       validation=opt.validation)[0]
+    if progress:
+        progress("input timing", 0, 2)
+    if opt.is_local(meas.spec):
+        from .local import local_problems
+        from .estimate.likelihood.scoring import LikelihoodScorer
+        probs = [p for p in local_problems(meas.spec, columns=cal.frame.columns,
+                                           latent_depth=opt.split.latent_depth)]
+        pick = [probs[int(i)] for i in np.unique(np.linspace(
+            0, len(probs) - 1, min(TIMING_PROBLEMS, len(probs))).round())]
+        kw = {k: v for k, v in _local_fit_options(opt).items() if k != "margin"}
+        bic = []
+        for k, data in enumerate((cal, ccal)):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", BoundWarning)
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                bic.append(sum(LikelihoodScorer(p.spec, p.data(data.frame), **kw).fit([])[1]
+                               for p in pick))
+            if progress:
+                progress("input timing", k + 1, 2)
+        where, fits = f"{len(pick)} local problems' conduction-only models", (None, None)
+    else:
+        fits = []
+        for k, data in enumerate((cal, ccal)):
+            fits.append(_conduction_only_fit(meas.spec, data, opt))
+            if progress:
+                progress("input timing", k + 1, 2)
+        bic = [f.bic_ for f in fits]
+        where = "the conduction-only model"
+    gain = float(bic[0] - bic[1])
+    use = gain > opt.selection.margin
+    note = (f"input timing: inputs centred on the step (each row's heat, supply air, solar and "
+            f"boundary temperatures averaged with the next row's) change BIC by {-gain:+.1f} on "
+            f"{where}: " + ("used (the values are means over the interval ending at their "
+                            "stamp)" if use else
+                            f"held as logged (centring must bring more than the margin "
+                            f"{opt.selection.margin:g})"))
+    logger.info("%s", note)
+    return done("centred" if use else "held", note, fits[1] if use else fits[0])
+
+
+def _resolve_fast_gain(spec, edges, cal, opt, notes, progress=None, off=None):
     """``opt`` with ``estimation.fast_gain`` decided: with ``auto`` the structure ``edges``
     (the identification asks with none: the conduction-only model) is fitted without and
     with the fast gain, and it stays when BIC improves by more than the selection margin (a
-    note says what it brought)."""
+    note says what it brought). ``off``: that fit without the fast gain when it is already
+    made (:func:`_resolve_input_timing` makes it for the conduction-only model)."""
     import dataclasses
     est = opt.estimation
     if est.fast_gain != "auto":
@@ -1077,7 +1179,8 @@ def _resolve_fast_gain(spec, edges, cal, opt, notes, progress=None):
     kw = dict(solar=est.solar, per_edge=bool(cs), **_mass_options(off_opt))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
-        off = LikelihoodEstimator(net, **kw).fit(cal)
+        if off is None or cs:
+            off = LikelihoodEstimator(net, **kw).fit(cal)
         if progress:
             progress("gain model", 1, 2)
         on = LikelihoodEstimator(net, fast_gain=True, **kw).fit(cal, init=dict(off.params_))

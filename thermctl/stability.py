@@ -232,9 +232,10 @@ def _candidate_names(spec, candidates) -> list:
 
 
 def _measurements(cal, frame):
-    """``cal`` with its frame replaced (same spec, step, units, quality)."""
+    """``cal`` with its frame replaced (same spec, step, units, quality, input timing)."""
     from .data import Measurements
-    return Measurements(frame, cal.step, cal.spec, cal.units, cal.source, cal.quality)
+    return Measurements(frame, cal.step, cal.spec, cal.units, cal.source, cal.quality,
+                        cal.input_timing)
 
 
 def _frequencies(names, resamples):

@@ -102,6 +102,13 @@ def identify(
                                   "time constant fitted) beside the random walk, for "
                                   "occupancy that changes by the hour: auto (kept when it "
                                   "improves BIC by more than --margin), on or off."),
+    input_timing: str = typer.Option(_D.estimation.input_timing, "--input-timing",
+                                     help="How a row's inputs act on the step after it: held "
+                                     "(as logged: samples a controller holds), centred (the "
+                                     "mean of the row and the next: values that are means "
+                                     "over the interval ending at their stamp, as meters "
+                                     "export) or auto (centred when it improves the "
+                                     "conduction-only BIC by more than --margin)."),
     wall_factors: bool = typer.Option(_D.estimation.wall_factors, help="Kalman criteria: fit a UA "
                                       "factor per wall class (exterior, partition, other "
                                       "boundary); local problems: the median of theirs."),
@@ -219,7 +226,8 @@ def identify(
                                      initial_state=initial_state, grid=grid,
                                      internal_mass=internal_mass, wall_factors=wall_factors,
                                      innovations=innovations,
-                                     fast_gain=_FAST_GAIN.get(fast_gain, fast_gain)),
+                                     fast_gain=_FAST_GAIN.get(fast_gain, fast_gain),
+                                     input_timing=input_timing),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
@@ -390,12 +398,13 @@ def validate(
     model = load_model(model_path)
     spec = model.network.spec
     meas = _read_data(data, spec, units)
-    cal, val = meas.split(validation=_window(validation, "--validation")
-                          or _saved_window(model, "validation"))
-    truth_model = _truth_model(truth, data, spec)
     saved = model.meta.get("options", {})
     # nested by stage since options were grouped; flat in older model.json files
     solar = saved.get("estimation", saved).get("solar", True)
+    meas = _as_fitted(meas, model)
+    cal, val = meas.split(validation=_window(validation, "--validation")
+                          or _saved_window(model, "validation"))
+    truth_model = _truth_model(truth, data, spec)
     stage = "open loop, step responses" + (", k-step-ahead filters" if kstep else "")
     with progress("validate") as bar:       # one long step: a clock, or heartbeat lines
         cb = _progress_callback(bar)
@@ -417,6 +426,15 @@ def validate(
     _print_validation(vr)
     console.print(f"wrote {Path(outdir) / 'validation.json'}")
     return vr
+
+
+def _as_fitted(meas, model):
+    """``meas`` with the input timing the model was identified with (``centred``: every
+    input the mean of its row and the next, :meth:`Measurements.centred_inputs`)."""
+    saved = model.meta.get("options", {})
+    if saved.get("estimation", saved).get("input_timing") == "centred":
+        return meas.centred_inputs()
+    return meas
 
 
 def _saved_window(model, key):
@@ -481,7 +499,7 @@ def simulate(
     from ..io import atomic_write_text
     model = load_model(model_path)
     net = model.network
-    meas = _read_data(data, net.spec, units)
+    meas = _as_fitted(_read_data(data, net.spec, units), model)
     win = meas.window(start=start, duration=None if hours is None else f"{hours}h")
     zt = win.zone_temperatures()
     T0 = [zt[z].iloc[0] if z in zt else np.nan for z in net.zones]

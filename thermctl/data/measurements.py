@@ -222,6 +222,10 @@ class Measurements:
     source : str
     quality : QualityReport
         The data-quality report of the whole read (shared by windows and splits).
+    input_timing : {"held", "centred"}
+        How a row's inputs act on the step that starts at its stamp: ``held`` as logged
+        (a sample the controller holds over the step), ``centred`` already replaced by the
+        mean of the row and the next (:meth:`centred_inputs`).
     """
 
     frame: pd.DataFrame
@@ -230,6 +234,7 @@ class Measurements:
     units: str
     source: str
     quality: QualityReport
+    input_timing: str = "held"
 
     def __repr__(self):
         return (f"Measurements({self.source!r}: {len(self.frame)} samples × "
@@ -319,6 +324,37 @@ class Measurements:
                 f"{self.spec.source}: zones {sorted(zones)} vs {sorted(self.spec.zone_names)}, "
                 f"boundary {sorted(bnd)} vs {sorted(self.spec.boundary)}")
         return network_inputs(self.frame, network)
+
+    def centred_inputs(self) -> "Measurements":
+        """The same data with every input column centred on the step.
+
+        Each value of a column other than a zone temperature ``T:<zone>`` (heat ``Q:``,
+        supply ``ms:``/``Ts:``, ``solar:``, boundary ``T:``...) becomes the mean of itself
+        and the next row's, which the model then holds over the step between the two
+        rows. That is the input of that step when every value is the mean over the
+        interval that *ends* at its stamp, as meters and many trend logs export: the zone
+        temperatures are then means too, centred half a step earlier, and the step between
+        two of them spans half of each input interval. Holding the logged value instead
+        applies every input half a step to a step late. The last row, and a row whose
+        next value is missing, keep their own value.
+
+        Returns
+        -------
+        Measurements
+            ``input_timing="centred"``; ``self`` when it already is.
+        """
+        if self.input_timing == "centred":
+            return self
+        zones = {f"T:{z}" for z in self.spec.zone_names}
+        frame = self.frame.copy()
+        for c in frame.columns:
+            if c in zones or not pd.api.types.is_numeric_dtype(frame[c]):
+                continue
+            x = frame[c].to_numpy(float)
+            nxt = np.r_[x[1:], x[-1:]]
+            frame[c] = np.where(np.isfinite(nxt), 0.5 * (x + nxt), x)
+        return Measurements(frame, self.step, self.spec, self.units, self.source,
+                            self.quality, "centred")
 
     # ---- time windows and splits ---------------------------------------------
     def window(self, start=None, end=None, duration=None) -> "Measurements":
@@ -504,7 +540,8 @@ class Measurements:
         sub = self.frame[(idx >= t0) & (idx < t1)]
         if sub.empty:
             raise DataError(f"{self.source}: {what} window {t0} to {t1} holds no samples")
-        return Measurements(sub, self.step, self.spec, self.units, self.source, self.quality)
+        return Measurements(sub, self.step, self.spec, self.units, self.source, self.quality,
+                            self.input_timing)
 
     def _whole_days(self) -> list:
         """Dates the grid covers but for at most :data:`SPLIT_DAY_SLACK` (NaN or not).
