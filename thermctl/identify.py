@@ -1077,15 +1077,14 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
 
 def _conduction_only_fit(spec, cal, opt):
     """The conduction-only likelihood fit without fast gain that the gain-model decision
-    starts from (:func:`_resolve_fast_gain`), on ``cal``."""
+    starts from (:func:`_resolve_fast_gain`), on ``cal``. Thread-safe: the caller holds
+    the warnings filter (:func:`thermctl._blas.ignore_warnings`)."""
     import dataclasses
     from .estimate.likelihood import LikelihoodEstimator
     est = opt.estimation
     off_opt = dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=False))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", BoundWarning)
-        return LikelihoodEstimator(ThermalNetwork(spec), solar=est.solar, per_edge=False,
-                                   **_mass_options(off_opt)).fit(cal)
+    return LikelihoodEstimator(ThermalNetwork(spec), solar=est.solar, per_edge=False,
+                               **_mass_options(off_opt)).fit(cal)
 
 
 #: Local problems the local path's ``input_timing="auto"`` is decided on (evenly spaced).
@@ -1138,11 +1137,14 @@ def _resolve_input_timing(meas, cal, opt, progress=None):
                 progress("input timing", k + 1, 2)
         where, fits = f"{len(pick)} local problems' conduction-only models", (None, None)
     else:
-        fits = []
-        for k, data in enumerate((cal, ccal)):
-            fits.append(_conduction_only_fit(meas.spec, data, opt))
-            if progress:
-                progress("input timing", k + 1, 2)
+        from ._blas import ignore_warnings
+        from ._parallel import thread_map
+        # the two fits side by side (twin house: 7 s each, one after the other 14 s)
+        with ignore_warnings(BoundWarning, ConvergenceWarning):
+            fits = thread_map(lambda data: _conduction_only_fit(meas.spec, data, opt),
+                              (cal, ccal), _threads(opt))
+        if progress:
+            progress("input timing", 2, 2)
         bic = [f.bic_ for f in fits]
         where = "the conduction-only model"
     gain = float(bic[0] - bic[1])
