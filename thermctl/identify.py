@@ -212,7 +212,7 @@ class EstimationOptions:
         interval ending at the stamp: meters, the twin house's 10-min averages). ``auto``
         (default, Kalman criteria): the conduction-only model is fitted both ways and
         ``centred`` is used when it improves BIC by more than ``selection.margin``
-        (measured: the twin house −14 168, the Pugh Hall testbed +247, i.e. ``held``);
+        (measured: the twin house −20 656, the Pugh Hall testbed +247, i.e. ``held``);
         the local path decides on the sum over a few local problems. With
         ``criterion="simulation"`` ``auto`` is ``held``.
     """
@@ -839,9 +839,19 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         from distributed import Client
         client, own = Client(client), True
     try:
+        items = list(items)
         splits = [m.split(calibration=opt.calibration, validation=opt.validation) for m in items]
         local = [k for k, m in enumerate(items) if opt.is_local(m.spec)]
         whole = [k for k in range(len(items)) if k not in local]
+        # each building locally identified gets its own input timing (identify() decides
+        # it for the others)
+        opts, timing = {}, {}
+        for k in local:
+            items[k], opts[k], timing[k], _ = _resolve_input_timing(items[k], splits[k][0], opt,
+                                                                    progress)
+            if items[k].input_timing == "centred":
+                splits[k] = items[k].split(calibration=opt.calibration,
+                                           validation=opt.validation)
         futures = {}
         if client is not None:
             futures = {k: client.submit(identify, items[k], opt, pure=False) for k in whole}
@@ -869,7 +879,9 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.split.combine,
                           opt.selection.margin, wall)
             cal, val = splits[k]
-            out[k] = _finish_local(items[k], cal, val, opt, li, progress, client)
+            out[k] = _finish_local(items[k], cal, val, opts[k], li, progress, client)
+            if timing[k]:
+                out[k].notes.insert(0, timing[k])
         for k in whole:
             out[k] = futures[k].result() if k in futures else identify(items[k], opt, progress)
         return [out[k] for k in range(len(items))]
