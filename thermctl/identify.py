@@ -1133,10 +1133,11 @@ def _resolve_input_timing(meas, cal, opt, progress=None):
     if opt.is_local(meas.spec):
         from .local import local_problems
         from .estimate.likelihood.scoring import LikelihoodScorer
-        probs = [p for p in local_problems(meas.spec, columns=cal.frame.columns,
-                                           latent_depth=opt.split.latent_depth)]
-        pick = [probs[int(i)] for i in np.unique(np.linspace(
-            0, len(probs) - 1, min(TIMING_PROBLEMS, len(probs))).round())]
+        zones = list(meas.spec.measured_zones)
+        pick = local_problems(meas.spec, columns=cal.frame.columns, zones=[
+            zones[int(i)] for i in np.unique(np.linspace(
+                0, len(zones) - 1, min(TIMING_PROBLEMS, len(zones))).round())],
+            latent_depth=opt.split.latent_depth)
         kw = {k: v for k, v in _local_fit_options(opt).items() if k != "margin"}
         bic = []
         for k, data in enumerate((cal, ccal)):
