@@ -63,6 +63,9 @@ def test_identify_writes_complete_outputs(identified, tb_dir):
     # 12 days of closed-loop data: R̄_v within 35 % of the truth (3.36e-4)
     assert ident["model"]["rbar_v"] == pytest.approx(truth["rbar_v"], rel=0.35)
     assert "τ0" in " ".join(ident["greybox"]["verdicts"].values())
+    # the testbed logs instantaneous samples: auto holds the inputs as logged, and says so
+    assert any(n.startswith("input timing:") and "held as logged" in n for n in ident["notes"])
+    assert model["meta"]["options"]["estimation"]["input_timing"] == "held"
     assert {"network", "scores", "correlations"} <= {f["name"] for f in
                                                      json.loads((identified / "figures.json").read_text())}
     assert not [p for p in identified.parent.iterdir() if p.name.startswith(f".{identified.name}.")], \
