@@ -143,3 +143,22 @@ def test_validate_centres_the_data_of_a_centred_model(tmp_path, monkeypatch):
                               str(tmp_path / "tb" / "data.csv"), "--hours", "24", "--no-kstep"])
     assert res.exit_code == 0, res.output
     assert calls == [1]
+
+
+def test_benchmark_quick_run_prints_the_decision(capsys):
+    """``benchmarks/input_timing.py --quick``: the testbed's samples are held."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "input_timing.py"
+    spec = importlib.util.spec_from_file_location("bench_input_timing", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    try:
+        spec.loader.exec_module(mod)
+        mod.main(["--quick", "--days", "6"])
+    finally:
+        sys.modules.pop(spec.name, None)
+    row = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("pugh-hall")]
+    assert len(row) == 1 and row[0].split()[2] == "held" and float(row[0].split()[3]) > 10
