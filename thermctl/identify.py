@@ -1087,16 +1087,21 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
     return opt, ahead
 
 
+def _gain_decision_kw(opt, per_edge: bool = False) -> dict:
+    """:class:`LikelihoodEstimator` keywords of the gain-model decision's fit without the
+    fast gain (:func:`_resolve_fast_gain`)."""
+    import dataclasses
+    est = opt.estimation
+    off_opt = dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=False))
+    return dict(solar=est.solar, per_edge=per_edge, **_mass_options(off_opt))
+
+
 def _conduction_only_fit(spec, cal, opt):
     """The conduction-only likelihood fit without fast gain that the gain-model decision
     starts from (:func:`_resolve_fast_gain`), on ``cal``. Thread-safe: the caller holds
     the warnings filter (:func:`thermctl._blas.ignore_warnings`)."""
-    import dataclasses
     from .estimate.likelihood import LikelihoodEstimator
-    est = opt.estimation
-    off_opt = dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=False))
-    return LikelihoodEstimator(ThermalNetwork(spec), solar=est.solar, per_edge=False,
-                               **_mass_options(off_opt)).fit(cal)
+    return LikelihoodEstimator(ThermalNetwork(spec), **_gain_decision_kw(opt)).fit(cal)
 
 
 #: Local problems the local path's ``input_timing="auto"`` is decided on (evenly spaced).
@@ -1117,8 +1122,8 @@ def _resolve_input_timing(meas, cal, opt, progress=None):
     import dataclasses
     est = opt.estimation
 
-    def done(timing, note="", off=None):
-        m = meas.centred_inputs() if timing == "centred" else meas
+    def done(timing, note="", off=None, centred=None):
+        m = meas if timing == "held" else centred or meas.centred_inputs()
         return m, dataclasses.replace(opt, estimation=dataclasses.replace(
             est, input_timing=timing)), note, off
 
@@ -1126,8 +1131,8 @@ def _resolve_input_timing(meas, cal, opt, progress=None):
         return done(est.input_timing)
     if est.criterion == "simulation":
         return done("held")
-    ccal = meas.centred_inputs().split(calibration=opt.calibration,
-                                       validation=opt.validation)[0]
+    cmeas = meas.centred_inputs()
+    ccal = cmeas.split(calibration=opt.calibration, validation=opt.validation)[0]
     if progress:
         progress("input timing", 0, 2)
     if opt.is_local(meas.spec):
@@ -1169,7 +1174,7 @@ def _resolve_input_timing(meas, cal, opt, progress=None):
                             f"held as logged (centring must bring more than the margin "
                             f"{opt.selection.margin:g})"))
     logger.info("%s", note)
-    return done("centred" if use else "held", note, fits[1] if use else fits[0])
+    return done("centred" if use else "held", note, fits[1] if use else fits[0], cmeas)
 
 
 def _resolve_fast_gain(spec, edges, cal, opt, notes, progress=None, off=None):
@@ -1191,7 +1196,7 @@ def _resolve_fast_gain(spec, edges, cal, opt, notes, progress=None, off=None):
     net = ThermalNetwork(spec, [c.pair + (c.d,) for c in cs])
     if progress:
         progress("gain model", 0, 2)
-    kw = dict(solar=est.solar, per_edge=bool(cs), **_mass_options(off_opt))
+    kw = _gain_decision_kw(opt, bool(cs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         if off is None or cs:
