@@ -37,10 +37,10 @@ from thermctl.testbed import generate  # noqa: E402
 def decide(meas):
     """``(timing, BIC change of centring)`` of the ``auto`` decision on ``meas``."""
     opt = IdentifyOptions()
-    cal, _ = meas.split(calibration=opt.calibration, validation=opt.validation)
+    cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        _, o, note, _ = _resolve_input_timing(meas, cal, opt)
+        *_, o, note, _ = _resolve_input_timing(meas, cal, val, opt)
     return o.estimation.input_timing, float(re.search(r"BIC by ([-+0-9.]+)", note).group(1))
 
 

@@ -93,8 +93,9 @@ def test_auto_follows_how_the_log_was_made(small_spec, heated_house, how, expect
     meas = read_measurements(_log_every_ten(heated_house, how), small_spec, name=how)
     opt = IdentifyOptions()
     opt.split.scale = scale
-    cal, _ = meas.split(calibration=opt.calibration, validation=opt.validation)
-    m2, opt2, note, off = _resolve_input_timing(meas, cal, opt)
+    cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
+    m2, cal2, val2, opt2, note, off = _resolve_input_timing(meas, cal, val, opt)
+    assert cal2.input_timing == val2.input_timing == expect
     assert opt2.estimation.input_timing == expect and m2.input_timing == expect, note
     assert note.startswith("input timing:") and ("used" in note) == (expect == "centred")
     if scale == "global":
@@ -107,7 +108,7 @@ def test_auto_follows_how_the_log_was_made(small_spec, heated_house, how, expect
     for given in ("held", "centred"):
         o = IdentifyOptions()
         o.estimation.input_timing = given
-        m3, o3, note3, off3 = _resolve_input_timing(meas, cal, o)
+        m3, _, _, o3, note3, off3 = _resolve_input_timing(meas, cal, val, o)
         assert m3.input_timing == given and note3 == "" and off3 is None
 
 

@@ -484,9 +484,8 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     opt = options or IdentifyOptions()
     opt.check()
     cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
-    meas, opt, timing_note, off = _resolve_input_timing(meas, cal, opt, progress)
-    if meas.input_timing == "centred":
-        cal, val = meas.split(calibration=opt.calibration, validation=opt.validation)
+    meas, cal, val, opt, timing_note, off = _resolve_input_timing(meas, cal, val, opt,
+                                                                  progress)
     flows = meas.spec.flows
     local = False
     if opt.paper or opt.selection_method == "scores":
@@ -847,11 +846,9 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         # it for the others)
         opts, timing = {}, {}
         for k in local:
-            items[k], opts[k], timing[k], _ = _resolve_input_timing(items[k], splits[k][0], opt,
-                                                                    progress)
-            if items[k].input_timing == "centred":
-                splits[k] = items[k].split(calibration=opt.calibration,
-                                           validation=opt.validation)
+            m, c, v, opts[k], timing[k], _ = _resolve_input_timing(items[k], *splits[k], opt,
+                                                                   progress)
+            items[k], splits[k] = m, (c, v)
         futures = {}
         if client is not None:
             futures = {k: client.submit(identify, items[k], opt, pure=False) for k in whole}
@@ -1108,8 +1105,10 @@ def _conduction_only_fit(spec, cal, opt):
 TIMING_PROBLEMS = 4
 
 
-def _resolve_input_timing(meas, cal, opt, progress=None):
-    """``(meas, opt, note, off)``: ``estimation.input_timing`` decided, and the data with it.
+def _resolve_input_timing(meas, cal, val, opt, progress=None):
+    """``(meas, cal, val, opt, note, off)``: ``estimation.input_timing`` decided, and the
+    data with it (``cal``, ``val``: the calibration and validation split of ``meas``, split
+    again when centred).
 
     ``auto`` fits the conduction-only model on the calibration days with the inputs as
     logged and centred (:meth:`thermctl.data.Measurements.centred_inputs`) and centres
@@ -1123,9 +1122,12 @@ def _resolve_input_timing(meas, cal, opt, progress=None):
     est = opt.estimation
 
     def done(timing, note="", off=None, centred=None):
-        m = meas if timing == "held" else centred or meas.centred_inputs()
-        return m, dataclasses.replace(opt, estimation=dataclasses.replace(
-            est, input_timing=timing)), note, off
+        o = dataclasses.replace(opt, estimation=dataclasses.replace(est, input_timing=timing))
+        if timing == "held":
+            return meas, cal, val, o, note, off
+        m = centred or meas.centred_inputs()
+        return (m, *m.split(calibration=opt.calibration, validation=opt.validation), o, note,
+                off)
 
     if est.input_timing != "auto":
         return done(est.input_timing)
