@@ -53,6 +53,7 @@ Usage::
 
     python benchmarks/scale.py --quick                 # 9 zones, 4 days, workers 1 and 2 (~1-2 min)
     python benchmarks/scale.py --zones 7 25 50 --global-too
+    python benchmarks/scale.py --zones 49 196 --workers 2 --seed 0 1 2 3   # + pooled lines
     OMP_NUM_THREADS=1 nice python benchmarks/scale.py --save   # 7…200 zones → results/scale.txt
 
 Progress (timestamps, per-row summaries, local problems done) goes to stderr, the table to
@@ -369,6 +370,34 @@ def buildings(zones, pugh: bool):
     return out
 
 
+def pooled(rows) -> list[str]:
+    """One line per (size, scale, workers) over the seeds' rows: true paths found of all
+    true paths, false paths per 10 zones, mean CPU; then the mean-CPU ratio of each size
+    to the smallest with the same scale and workers (the linear-growth target compares
+    200 zones with 50)."""
+    groups = {}
+    for r in rows:
+        size = r.building.rsplit(" s", 1)[0] if " s" in r.building else r.building
+        groups.setdefault((size, r.zones, r.scale, r.workers), []).append(r)
+    lines, first = [], {}
+    for (size, zones, scale, w), rs in groups.items():
+        ok = [r for r in rs if not math.isnan(r.cpu)]
+        hit, true = sum(r.n_hit for r in ok), sum(r.n_true for r in ok)
+        false = sum(r.n_false for r in ok)
+        cpu = float(np.mean([r.cpu for r in ok])) if ok else math.nan
+        wall = float(np.mean([r.wall for r in ok])) if ok else math.nan
+        text = (f"pooled {size} {scale} w={w}: {len(ok)} seed(s), recall {hit}/{true} = "
+                f"{hit / max(true, 1):.2f}, {false} false = "
+                f"{10 * false / max(zones * len(ok), 1):.2f} per 10 zones; mean "
+                f"{wall:.1f} s wall, {cpu:.1f} s CPU")
+        base = first.setdefault((scale, w), (zones, cpu, wall))
+        if base[0] != zones:
+            text += (f"; ×{cpu / base[1]:.2f} CPU, ×{wall / base[2]:.2f} wall of {base[0]} "
+                     f"zones for ×{zones / base[0]:.2f} the zones")
+        lines.append(text)
+    return lines
+
+
 # ---------------------------------------------------------------------------- main
 def main(argv=None) -> Result:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -378,7 +407,9 @@ def main(argv=None) -> Result:
                     help="worker processes of the local problems (default 1 2; none: "
                          "no local row, e.g. with --global-too)")
     ap.add_argument("--days", type=float, default=14.0, help="generated days (default 14)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, nargs="+", default=[0],
+                    help="testbed seed(s); with several, every building is drawn once per seed "
+                         "and a pooled line per size follows the table (default 0)")
     ap.add_argument("--quick", action="store_true",
                     help="one 9-zone corridor, 4 days, workers 1 and 2 (~1-2 min)")
     ap.add_argument("--global-too", action="store_true",
@@ -405,7 +436,9 @@ def main(argv=None) -> Result:
     cmd = "python benchmarks/scale.py " + " ".join(argv if argv is not None else sys.argv[1:])
     out(f"# Identification at building scale ({cmd.strip()})")
     out()
-    out(f"thermctl @ {_git_head()}, {time.strftime('%Y-%m-%d %H:%M')}, seed {args.seed}, "
+    seeds = list(dict.fromkeys(args.seed))
+    out(f"thermctl @ {_git_head()}, {time.strftime('%Y-%m-%d %H:%M')}, "
+        f"seed{'s' if len(seeds) > 1 else ''} {' '.join(map(str, seeds))}, "
         f"{args.days:g} generated days (last quarter held back), 5-min data; "
         f"identify(scale=..., workers=N, intervals='none'); OMP_NUM_THREADS="
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}")
@@ -413,13 +446,15 @@ def main(argv=None) -> Result:
     rows = []
     started = False
     try:
-        for label, kw, z in buildings(args.zones, not args.no_pugh):
+        for label, kw, z, seed in [(lb + (f" s{sd}" if len(seeds) > 1 else ""), kw, z, sd)
+                                   for lb, kw, z in buildings(args.zones, not args.no_pugh)
+                                   for sd in seeds]:
             t = time.perf_counter()
             say(f"{label}: generating {args.days:g} days")
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    tb = generate(days=args.days, seed=args.seed, **kw)
+                    tb = generate(days=args.days, seed=seed, **kw)
                     meas = read_measurements(tb.data, tb.spec, name=label)
             except Exception as exc:    # noqa: BLE001 - a building that fails is a result
                 say(f"{label}: generation failed: {type(exc).__name__}: {exc}")
@@ -449,6 +484,10 @@ def main(argv=None) -> Result:
         seconds = time.perf_counter() - T0
         if not started:
             out("(no row)")
+        if len(seeds) > 1 and rows:
+            out()
+            for ln in pooled(rows):
+                out(ln)
         out()
         out(f"machine: {cores} cores ({avail} available to this process); load average "
             f"(1, 5, 15 min) at start {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, at end "

@@ -216,3 +216,29 @@ def test_scale_quick_serial_and_processes_agree():
     body = lines[head + 2:head + 4]
     assert all(ln.startswith("| corridor 9 ") for ln in body)
     assert "load average" in text and "cores" in text
+
+
+def test_scale_pooled_lines_sum_over_seeds():
+    """benchmarks/scale.py's pooled line per size: recall and false paths summed over the
+    seeds' rows, false per 10 zones over every building drawn, and the mean-CPU ratio of a
+    larger size to the smallest."""
+    path = SCRIPT.parent / "scale.py"
+    spec = importlib.util.spec_from_file_location("bench_scale_pooled", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    try:
+        spec.loader.exec_module(mod)
+        Row = mod.Row
+        rows = [Row("corridor 49 s0", 49, 48, "local", 2, cpu=70.0, wall=36.0, n_true=13, n_hit=11, n_false=1),
+                Row("corridor 49 s1", 49, 48, "local", 2, cpu=80.0, wall=40.0, n_true=15, n_hit=11, n_false=3),
+                Row("corridor 196 s0", 196, 192, "local", 2, cpu=330.0, wall=170.0, n_true=51, n_hit=32, n_false=17),
+                Row("corridor 196 s1", 196, 192, "local", 2, cpu=270.0, wall=150.0, n_true=57, n_hit=39, n_false=16)]
+        lines = mod.pooled(rows)
+    finally:
+        sys.modules.pop(spec.name, None)
+    assert len(lines) == 2
+    assert "2 seed(s), recall 22/28 = 0.79, 4 false = 0.41 per 10 zones" in lines[0]
+    assert "mean 38.0 s wall, 75.0 s CPU" in lines[0]
+    assert "recall 71/108 = 0.66, 33 false = 0.84 per 10 zones" in lines[1]
+    # (330 + 270)/2 / 75 = 4.00; (170 + 150)/2 / 38 = 4.21
+    assert "×4.00 CPU, ×4.21 wall of 49 zones for ×4.00 the zones" in lines[1]
