@@ -118,6 +118,7 @@ class Row:
     rbar_err: float = math.nan
     rbar_err_local: float = math.nan
     edges: list = field(default_factory=list)
+    true_paths: list = field(default_factory=list)
     failed_problems: int = 0
     note: str = ""
 
@@ -263,6 +264,8 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
     s = score(ident.model, tb.truth.edges, tb.truth.rbar_v)
     row.n_true, row.n_hit, row.n_false = s["n_true"], s["n_hit"], s["n_false"]
     row.rbar_err, row.edges = s["rbar_err"], s["edges"]
+    found = {tuple(p) for p in row.edges}
+    row.true_paths = [(float(d), _pair(a, b) in found) for a, b, d in tb.truth.edges]
     return row
 
 
@@ -370,11 +373,16 @@ def buildings(zones, pugh: bool):
     return out
 
 
+LENGTH_BINS = (0.0, 3.0, 5.0, 7.0, math.inf)
+"""Air path lengths [m] the pooled lines count true paths found in: a path's conductance
+is 1/(R̄_v·d), and the long ones are the ones lost."""
+
+
 def pooled(rows) -> list[str]:
     """One line per (size, scale, workers) over the seeds' rows: true paths found of all
     true paths, false paths per 10 zones, mean CPU; then the mean-CPU ratio of each size
     to the smallest with the same scale and workers (the linear-growth target compares
-    200 zones with 50)."""
+    200 zones with 50), and under it the true paths found by length (:data:`LENGTH_BINS`)."""
     groups = {}
     for r in rows:
         size = r.building.rsplit(" s", 1)[0] if " s" in r.building else r.building
@@ -395,6 +403,18 @@ def pooled(rows) -> list[str]:
             text += (f"; ×{cpu / base[1]:.2f} CPU, ×{wall / base[2]:.2f} wall of {base[0]} "
                      f"zones for ×{zones / base[0]:.2f} the zones")
         lines.append(text)
+        paths = [p for r in ok for p in r.true_paths]
+        if paths:
+            d = np.array([p[0] for p in paths])
+            hit = np.array([p[1] for p in paths], dtype=bool)
+            parts = []
+            for lo, hi in zip(LENGTH_BINS, LENGTH_BINS[1:]):
+                m = (d >= lo) & (d < hi)
+                name = f"< {hi:g} m" if lo == 0 else (f">= {lo:g} m" if math.isinf(hi)
+                                                        else f"{lo:g}-{hi:g} m")
+                parts.append(f"{name} {int(hit[m].sum())}/{int(m.sum())}")
+            lines.append(f"  true paths found by length (median {np.median(d):.1f} m): "
+                         + ", ".join(parts))
     return lines
 
 

@@ -229,16 +229,20 @@ def test_scale_pooled_lines_sum_over_seeds():
     try:
         spec.loader.exec_module(mod)
         Row = mod.Row
-        rows = [Row("corridor 49 s0", 49, 48, "local", 2, cpu=70.0, wall=36.0, n_true=13, n_hit=11, n_false=1),
+        rows = [Row("corridor 49 s0", 49, 48, "local", 2, cpu=70.0, wall=36.0, n_true=13, n_hit=11, n_false=1,
+                    true_paths=[(2.0, True), (2.9, False), (3.0, True), (6.5, False), (7.0, True)]),
                 Row("corridor 49 s1", 49, 48, "local", 2, cpu=80.0, wall=40.0, n_true=15, n_hit=11, n_false=3),
                 Row("corridor 196 s0", 196, 192, "local", 2, cpu=330.0, wall=170.0, n_true=51, n_hit=32, n_false=17),
                 Row("corridor 196 s1", 196, 192, "local", 2, cpu=270.0, wall=150.0, n_true=57, n_hit=39, n_false=16)]
         lines = mod.pooled(rows)
     finally:
         sys.modules.pop(spec.name, None)
-    assert len(lines) == 2
+    assert len(lines) == 3
     assert "2 seed(s), recall 22/28 = 0.79, 4 false = 0.41 per 10 zones" in lines[0]
     assert "mean 38.0 s wall, 75.0 s CPU" in lines[0]
-    assert "recall 71/108 = 0.66, 33 false = 0.84 per 10 zones" in lines[1]
+    # bins are closed below, open above: 3.0 falls in 3-5 m, 7.0 in >= 7 m
+    assert lines[1] == ("  true paths found by length (median 3.0 m): < 3 m 1/2, 3-5 m 1/1, "
+                        "5-7 m 0/1, >= 7 m 1/1")
+    assert "recall 71/108 = 0.66, 33 false = 0.84 per 10 zones" in lines[2]
     # (330 + 270)/2 / 75 = 4.00; (170 + 150)/2 / 38 = 4.21
-    assert "×4.00 CPU, ×4.21 wall of 49 zones for ×4.00 the zones" in lines[1]
+    assert "×4.00 CPU, ×4.21 wall of 49 zones for ×4.00 the zones" in lines[2]
