@@ -406,13 +406,13 @@ def pooled(rows) -> list[str]:
         paths = [p for r in ok for p in r.true_paths]
         if paths:
             d = np.array([p[0] for p in paths])
-            hit = np.array([p[1] for p in paths], dtype=bool)
+            found = np.array([p[1] for p in paths], dtype=bool)
             parts = []
             for lo, hi in zip(LENGTH_BINS, LENGTH_BINS[1:]):
                 m = (d >= lo) & (d < hi)
                 name = f"< {hi:g} m" if lo == 0 else (f">= {lo:g} m" if math.isinf(hi)
                                                         else f"{lo:g}-{hi:g} m")
-                parts.append(f"{name} {int(hit[m].sum())}/{int(m.sum())}")
+                parts.append(f"{name} {int(found[m].sum())}/{int(m.sum())}")
             lines.append(f"  true paths found by length (median {np.median(d):.1f} m): "
                          + ", ".join(parts))
     return lines
