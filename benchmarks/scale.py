@@ -119,6 +119,7 @@ class Row:
     rbar_err_local: float = math.nan
     edges: list = field(default_factory=list)
     true_paths: list = field(default_factory=list)
+    group: str = ""
     failed_problems: int = 0
     note: str = ""
 
@@ -385,8 +386,7 @@ def pooled(rows) -> list[str]:
     200 zones with 50), and under it the true paths found by length (:data:`LENGTH_BINS`)."""
     groups = {}
     for r in rows:
-        size = r.building.rsplit(" s", 1)[0] if " s" in r.building else r.building
-        groups.setdefault((size, r.zones, r.scale, r.workers), []).append(r)
+        groups.setdefault((r.group or r.building, r.zones, r.scale, r.workers), []).append(r)
     lines, first = [], {}
     for (size, zones, scale, w), rs in groups.items():
         ok = [r for r in rs if not math.isnan(r.cpu)]
@@ -466,9 +466,10 @@ def main(argv=None) -> Result:
     rows = []
     started = False
     try:
-        for label, kw, z, seed in [(lb + (f" s{sd}" if len(seeds) > 1 else ""), kw, z, sd)
-                                   for lb, kw, z in buildings(args.zones, not args.no_pugh)
-                                   for sd in seeds]:
+        for group, label, kw, z, seed in [(lb, lb + (f" s{sd}" if len(seeds) > 1 else ""), kw,
+                                           z, sd)
+                                          for lb, kw, z in buildings(args.zones, not args.no_pugh)
+                                          for sd in seeds]:
             t = time.perf_counter()
             say(f"{label}: generating {args.days:g} days")
             try:
@@ -489,6 +490,7 @@ def main(argv=None) -> Result:
             for scale, w in runs:
                 say(f"{label}: identify scale={scale}" + (f" workers={w}" if w else ""))
                 r = run_one(label, tb, meas, scale, w, n_zones)
+                r.group = group
                 rows.append(r)
                 if not started:
                     for ln in header():

@@ -229,11 +229,17 @@ def test_scale_pooled_lines_sum_over_seeds():
     try:
         spec.loader.exec_module(mod)
         Row = mod.Row
-        rows = [Row("corridor 49 s0", 49, 48, "local", 2, cpu=70.0, wall=36.0, n_true=13, n_hit=11, n_false=1,
-                    true_paths=[(2.0, True), (2.9, False), (3.0, True), (6.5, False), (7.0, True)]),
-                Row("corridor 49 s1", 49, 48, "local", 2, cpu=80.0, wall=40.0, n_true=15, n_hit=11, n_false=3),
-                Row("corridor 196 s0", 196, 192, "local", 2, cpu=330.0, wall=170.0, n_true=51, n_hit=32, n_false=17),
-                Row("corridor 196 s1", 196, 192, "local", 2, cpu=270.0, wall=150.0, n_true=57, n_hit=39, n_false=16)]
+        kw = dict(scale="local", workers=2)
+        rows = [Row("corridor 49 s0", 49, 48, group="corridor 49", cpu=70.0, wall=36.0,
+                    n_true=13, n_hit=11, n_false=1, **kw,
+                    true_paths=[(2.0, True), (2.9, False), (3.0, True), (6.5, False),
+                                (7.0, True)]),
+                Row("corridor 49 s1", 49, 48, group="corridor 49", cpu=80.0, wall=40.0,
+                    n_true=15, n_hit=11, n_false=3, **kw),
+                Row("corridor 196 s0", 196, 192, group="corridor 196", cpu=330.0, wall=170.0,
+                    n_true=51, n_hit=32, n_false=17, **kw),
+                Row("corridor 196 s1", 196, 192, group="corridor 196", cpu=270.0, wall=150.0,
+                    n_true=57, n_hit=39, n_false=16, **kw)]
         lines = mod.pooled(rows)
     finally:
         sys.modules.pop(spec.name, None)
