@@ -146,7 +146,7 @@ def _wall(d, i):
 
 ALLOWED = {
     "top": r"\['boundary', 'capacity_multiplier', 'constructions', 'distances', 'flows', 'name', 'w_s', 'walls', 'zones'\]",
-    "zone": r"\['capacitance', 'measured', 'volume'\]",
+    "zone": r"\['capacitance', 'measured', 'storey', 'volume'\]",
     "wall": r"\['C', 'R', 'area', 'between', 'construction', 'heat_capacity', 'name', 'u_value'\]",
     "distance": r"\['between', 'd'\]",
 }
@@ -297,7 +297,7 @@ def test_unknown_key_error_lists_every_allowed_key(small_spec_dict, level, mutat
     listed = re.search(r"allowed keys are \[(.*)\]", str(info.value)).group(1)
     expected = {"top": {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls",
                         "distances", "flows", "constructions"},
-                "zone": {"volume", "measured", "capacitance"},
+                "zone": {"volume", "measured", "capacitance", "storey"},
                 "wall": {"between", "R", "C", "area", "u_value", "heat_capacity", "name",
                          "construction"},
                 "distance": {"between", "d"}}[level]
@@ -425,3 +425,62 @@ def test_candidate_pairs_include_wall_pairs_without_length(small_spec):
     assert cands[("hallway", "r2")].d == pytest.approx(4.2447, abs=1e-4)
     assert cands[("r1", "r3")].d == 9.0 and not cands[("r1", "r3")].parallel
     assert ("hallway", "r2") not in {c.pair for c in candidate_pairs(small_spec, parallel=False)}
+
+
+# ---------------------------------------------------------------------------------------------
+# storeys: a slab between two zones is no air path
+# ---------------------------------------------------------------------------------------------
+def test_storey_parsed_as_text_and_round_trips(small_spec_dict):
+    small_spec_dict["zones"]["r1"]["storey"] = 1
+    small_spec_dict["zones"]["r2"]["storey"] = "ground"
+    spec = spec_from_dict(small_spec_dict)
+    assert [z.storey for z in spec.zones] == ["1", "ground", None, None]
+    again = spec_from_dict(spec.to_dict())
+    assert [z.storey for z in again.zones] == ["1", "ground", None, None]
+    assert "storey" not in spec.to_dict()["zones"]["r3"]
+
+
+@pytest.mark.parametrize("bad", [True, 1.5, "", [1]])
+def test_storey_must_be_a_name_or_number(small_spec_dict, bad):
+    small_spec_dict["zones"]["r2"]["storey"] = bad
+    with pytest.raises(SpecError, match=r"zones\.r2\.storey: expected a storey name or number"):
+        spec_from_dict(small_spec_dict, source="b.yaml")
+
+
+def test_zones_on_different_storeys_share_a_slab_not_a_door(small_spec_dict):
+    from thermctl.structure.search import as_candidates, candidate_pairs
+    # r2 and the hallway share a wall and have no given length: a door is assumed...
+    same = {c.pair for c in candidate_pairs(spec_from_dict(small_spec_dict))}
+    assert ("hallway", "r2") in same
+    # ...unless they are on different storeys; a given length (r1–r2: a stair) still counts,
+    # and a zone without a storey is not restricted (r3–hallway)
+    for z, s in (("r1", 1), ("r2", 2), ("hallway", 1)):
+        small_spec_dict["zones"][z]["storey"] = s
+    spec = spec_from_dict(small_spec_dict)
+    assert spec.across_storeys("r2", "hallway") and not spec.across_storeys("r1", "hallway")
+    assert not spec.across_storeys("r2", "r3") and not spec.across_storeys("r2", "outside")
+    assert spec.air_path_length("hallway", "r2") == (None, False)
+    assert spec.air_path_length("r1", "r2") == (4.0, False)
+    cands = {c.pair for c in candidate_pairs(spec)}
+    assert cands == same - {("hallway", "r2")}
+    with pytest.raises(SpecError, match="different storeys and only a slab joins them"):
+        as_candidates(spec, [("r2", "hallway")])
+
+
+def test_corridor_testbed_has_no_candidate_through_a_slab():
+    from thermctl.structure.search import candidate_pairs
+    from thermctl.testbed.buildings import corridor_layout
+    two = corridor_layout(6, floors=2, seed=3).spec
+    assert {z.storey for z in two.zones} == {"1", "2"}
+    cands = {c.pair for c in candidate_pairs(two)}
+    assert all(a[:2] == b[:2] for a, b in cands)          # f1… with f1…, f2… with f2…
+    # the same building without storeys: every slab (12 offices and the corridor, each
+    # over the one below) is a candidate as well; nothing else changes
+    raw = two.to_dict()
+    for z in raw["zones"].values():
+        del z["storey"]
+    flat = {c.pair for c in candidate_pairs(spec_from_dict(raw))}
+    slabs = {tuple(sorted((w.a, w.b))) for w in two.walls
+             if w.a in two.zone_names and w.b in two.zone_names and w.a[:2] != w.b[:2]}
+    assert len(slabs) == 13
+    assert flat - cands == slabs and cands <= flat

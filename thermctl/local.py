@@ -227,8 +227,8 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         bnd += [m for m in spec.zone_names if m in nodes and m not in local]
         bnd += agg_nodes
         # zone capacitances are fixed by the whole building's multiplier
-        zones_l = [Zone(zz.name, zz.volume, zz.measured, spec.zone_capacitance(zz.name))
-                   for zz in zones_l]
+        zones_l = [Zone(zz.name, zz.volume, zz.measured, spec.zone_capacitance(zz.name),
+                        zz.storey) for zz in zones_l]
         dists = tuple(Distance(a, b, d) for a, b, d in cands)
         # directed flows into the problem's zones: inputs (their source temperature and
         # rate are data columns, wherever the source is)

@@ -78,7 +78,7 @@ def wall_class(a: str, b: str, zones) -> str:
 
 _TOP_KEYS = {"name", "capacity_multiplier", "w_s", "zones", "boundary", "walls", "distances",
              "flows", "constructions"}
-_ZONE_KEYS = {"volume", "measured", "capacitance"}
+_ZONE_KEYS = {"volume", "measured", "capacitance", "storey"}
 _WALL_KEYS = {"between", "R", "C", "area", "u_value", "heat_capacity", "name", "construction"}
 _CONSTRUCTION_KEYS = {"u_value", "heat_capacity"}
 
@@ -118,12 +118,19 @@ class Zone:
         Whether its temperature is in the data (a hallway often is not).
     capacitance : float or None
         Heat capacity [J/K]; ``None`` means ``capacity_multiplier·ρ·cp·volume``.
+    storey : str or None
+        The storey (floor level) the zone is on, e.g. ``"1"`` or ``"ground"``; ``None``:
+        not said. Two zones on different storeys exchange no air through the slab
+        between them: the wall they share gives them no air-path candidate
+        (:meth:`BuildingSpec.air_path_length`); a stair or shaft between them is an
+        explicit ``distances`` entry.
     """
 
     name: str
     volume: float
     measured: bool = True
     capacitance: float | None = None
+    storey: str | None = None
 
 
 @dataclass(frozen=True)
@@ -255,15 +262,23 @@ class BuildingSpec:
         between the centres of two cubes of the zones' volumes,
         ``(V_a^(1/3) + V_b^(1/3)) / 2``: an air path through a door in the common wall.
         The estimate only scales that edge's resistance ``R̄_v·d``; with one R̄_v per edge
-        it cancels. Other pairs without a length: ``(None, False)``.
+        it cancels. Zones on different storeys (:attr:`Zone.storey`, both given) share a
+        slab, not a door: no estimate. Other pairs without a length: ``(None, False)``.
         """
         d = self.distance(a, b)
         if d is not None:
             return d, False
-        if frozenset((a, b)) in self.wall_pairs():
+        if frozenset((a, b)) in self.wall_pairs() and not self.across_storeys(a, b):
             za, zb = self.zone(a), self.zone(b)
             return 0.5 * (za.volume ** (1.0 / 3.0) + zb.volume ** (1.0 / 3.0)), True
         return None, False
+
+    def across_storeys(self, a: str, b: str) -> bool:
+        """Whether zones ``a`` and ``b`` are on different storeys (both storeys given; a
+        boundary node has none)."""
+        storey = {z.name: z.storey for z in self.zones}
+        sa, sb = storey.get(a), storey.get(b)
+        return sa is not None and sb is not None and sa != sb
 
     def wall_pairs(self) -> frozenset:
         """Zone pairs joined by at least one wall (cached)."""
@@ -304,6 +319,8 @@ class BuildingSpec:
                 entry["measured"] = False
             if z.capacitance is not None:
                 entry["capacitance"] = z.capacitance
+            if z.storey is not None:
+                entry["storey"] = z.storey
             zones[z.name] = entry
         walls = []
         for w in self.walls:
@@ -473,7 +490,13 @@ def spec_from_dict(data: dict, source: str = "<dict>") -> BuildingSpec:
         measured = entry.get("measured", True)
         if not isinstance(measured, bool):
             raise SpecError(f"{where}.measured: expected true or false, found {measured!r}")
-        zones.append(Zone(str(zname), vol, measured, cap))
+        storey = entry.get("storey")
+        if storey is not None:
+            if isinstance(storey, bool) or not isinstance(storey, (int, str)) or storey == "":
+                raise SpecError(f"{where}.storey: expected a storey name or number (e.g. 1 or "
+                                f"ground), found {storey!r}")
+            storey = str(storey)
+        zones.append(Zone(str(zname), vol, measured, cap, storey))
 
     boundary = data["boundary"] or []
     if not isinstance(boundary, (list, tuple)):

@@ -248,7 +248,7 @@ def corridor_layout(n_per_side: int, floors: int = 1, seed: int = 0, *, office_w
         hall_vol = hall_len * corridor_width * height
         for side, names in rows.items():
             for i, z in enumerate(names):
-                zones[z] = {"volume": round(office_width * depth * height, 3)}
+                zones[z] = {"volume": round(office_width * depth * height, 3), "storey": f}
                 area[z] = office_width * depth
                 kind[z] = "office"
                 glass = (office_width - 1.0) * 1.5
@@ -261,7 +261,7 @@ def corridor_layout(n_per_side: int, floors: int = 1, seed: int = 0, *, office_w
                 walls.append(_wall(a, b, "partition", depth * height, f"{a}|{b}"))
             for end in (names[0], names[-1]):
                 walls.append(_wall(end, "outside", "exterior", depth * floor_h, f"{end}:end"))
-        zones[hall] = {"volume": hall_vol, "measured": False,
+        zones[hall] = {"volume": hall_vol, "measured": False, "storey": f,
                        "capacitance": round(_hall_capacitance(hall_vol, cp_moist_air()), 1)}
         area[hall] = hall_len * corridor_width
         kind[hall] = "hall"
