@@ -29,8 +29,8 @@ for ``rc`` plants and the finite-volume plant itself for ``fd``), and the time o
 Every row is appended as JSON to ``benchmarks/results/family-runs.jsonl`` when it is done
 (``--save``), so an interrupted study keeps what it finished; ``--table`` rebuilds the
 tables from that file, with the last run of every case (a re-run replaces what it
-re-measured; runs with an option, " [t]", " [fast]" or " [all:holdout]", in a table of
-their own).
+re-measured; runs with an option, " [t]", " [fast]", " [all:holdout]" or " [predict 2]", in
+a table of their own).
 
 Usage::
 
@@ -220,6 +220,8 @@ def main(argv=None):
     ap.add_argument("--selection", metavar="CANDIDATES:CRITERION",
                     help="identify's --candidates and --selection-criterion, e.g. all:holdout "
                          "(case names get ' [all:holdout]')")
+    ap.add_argument("--predict-t", type=float, default=0.0, metavar="T",
+                    help="identify's --predict-t (case names get ' [predict T]')")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
@@ -258,6 +260,9 @@ def main(argv=None):
             cand, _, crit = args.selection.partition(":")
             sel = dict(candidates=cand, criterion=crit or "bic")
             name += f" [{args.selection}]"
+        if args.predict_t > 0:
+            sel["predict_t"] = args.predict_t
+            name += f" [predict {args.predict_t:g}]"
         row = run_case(study, name, kw, seed, days, estimation=est, selection=sel)
         rows.append(row)
         print(json.dumps(row), flush=True)

@@ -4,6 +4,7 @@ line naming the file and the node or element."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import textwrap
 import warnings
@@ -51,7 +52,9 @@ def test_pugh_hall_model_gives_the_handwritten_spec(pugh):
     hand, _ = pugh_hall_spec()
     spec = pugh.spec
     assert spec.name == hand.name == "pugh-hall-2f"
-    assert spec.zones == hand.zones                 # names, order, volumes, measured, C
+    # names, order, volumes, measured, C; the model also says the storey (brick:Floor)
+    assert [dataclasses.replace(z, storey=None) for z in spec.zones] == list(hand.zones)
+    assert {z.storey for z in spec.zones} == {"floor-2"}
     assert spec.capacity_multiplier == hand.capacity_multiplier == 6.0
     assert set(spec.boundary) == set(hand.boundary) and spec.boundary[0] == "outside"
     assert _walls(spec) == _walls(hand)             # names, ends, R, C, area: exact
@@ -107,7 +110,9 @@ def test_brick_round_trip_identifies_the_same_model(tmp_path, pugh):
                               str(tmp_path / "b" / "building.yaml"), "--columns-out",
                               str(tmp_path / "b" / "map.yaml")])
     assert res.exit_code == 0, res.output
-    assert load_spec(tmp_path / "b" / "building.yaml").zones == tb.spec.zones
+    # the Brick model also names the storey (brick:Floor), the testbed's spec does not
+    assert [dataclasses.replace(z, storey=None) for z in
+            load_spec(tmp_path / "b" / "building.yaml").zones] == list(tb.spec.zones)
     cmap = load_column_map(tmp_path / "b" / "map.yaml")
     assert cmap == pugh.columns
     _bas(tb, cmap).to_csv(tmp_path / "bas.csv", index=False)
@@ -191,6 +196,39 @@ def test_bot_adjacency_areas_and_imperial_points(tmp_path):
     assert imp.columns == {"t": "T:z1", "f": "vs:z1", "s": "Ts:z1", "oat": "T:outside"}
     assert imp.units == "imperial"
     assert any("merged" in n for n in imp.notes) and any("estimated" in n for n in imp.notes)
+
+
+def test_storeys_from_brick_floors_and_bot_storeys(tmp_path):
+    """A zone on a brick:Floor or a bot:Storey gets it; the slab between storeys proposes no
+    air path, a tc:airPath (a stair) does; a zone on two storeys gets none, with a note."""
+    from thermctl.structure.search import candidate_pairs
+    p = _ttl(tmp_path, """\
+        :b brick:hasPart :f1 .
+        :f1 a brick:Floor ; brick:hasPart :a, :b1 .
+        :f2 a bot:Storey ; bot:hasSpace :c, :d .
+        :atrium a brick:HVAC_Zone ; brick:hasPart :e1, :e2 .
+        :e1 a brick:Room ; brick:volume 40 ; brick:isPartOf :f1 .
+        :e2 a brick:Room ; brick:volume 40 ; brick:isPartOf :f2 .
+        :a a brick:Room ; brick:volume 50 .
+        :b1 a brick:Room ; brick:volume 50 .
+        :c a brick:Room ; brick:volume 50 .
+        :d a brick:Room ; brick:volume 50 .
+        :a bot:adjacentZone :b1, :c, :e1 .
+        :b1 bot:adjacentZone :d .
+        :c bot:adjacentZone :d, :e2 .
+        :a tc:airPath [ tc:to :d ; tc:length 7.5 ] .
+        """)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")    # no wall to a boundary node in this sketch
+        imp = read_brick(p)
+    spec = imp.spec
+    assert {z.name: z.storey for z in spec.zones} == {"a": "f1", "b1": "f1", "c": "f2",
+                                                     "d": "f2", "atrium": None}
+    assert any("atrium" in n and "storeys ['f1', 'f2']" in n for n in imp.notes)
+    pairs = {c.pair for c in candidate_pairs(spec)}
+    # walls: a–b1, c–d (same storey: doors possible), a–c and b1–d (slabs: none), the atrium
+    # with a and c (no storey: possible); the stair a–d by its given length
+    assert pairs == {("a", "b1"), ("c", "d"), ("a", "atrium"), ("atrium", "c"), ("a", "d")}
 
 
 _ROOM = ":r1 a brick:Room ; brick:volume 50 ; rec:adjacentElement :w1 .\n:w1 a rec:Wall ; brick:area 10 .\n"

@@ -28,6 +28,7 @@ def _fitted(day_nll):
 def _scorer(min_t):
     sc = LikelihoodScorer.__new__(LikelihoodScorer)   # no data needed for consistent()
     sc.min_t, sc.block, sc.test = min_t, 86400.0, None
+    sc.predict_t, sc.predict_horizon = 0.0, 6 * 3600.0
     return sc
 
 
@@ -148,3 +149,66 @@ def test_search_fits_each_structure_once():
     assert calls == [(), ("A",), ("A", "B"), ("B",)]
     keep = [s for s in res.path if s.action == "keep"][0]
     assert keep.screened == {"air:A-z": -60.0 + 150.0, "air:B-z": -100.0 + 150.0}
+
+
+def test_prediction_test_drops_a_gain_that_does_not_predict(monkeypatch):
+    """An edge whose likelihood gain holds on every day but whose 6-h predictions are worse
+    on 6 of 7 days fails with predict_t = 2 (and passes without it); the note says both."""
+    import thermctl.estimate.likelihood.scoring as scoring
+    small = _fitted(np.full(7, 100.0))
+    big = _fitted(np.full(7, 100.0) - [10.0, 9.0, 11.0, 10.0, 12.0, 9.0, 10.0])
+    mse = {id(small.problem_): np.full(7, 0.10),
+           id(big.problem_): np.array([0.11, 0.12, 0.105, 0.09, 0.13, 0.115, 0.12])}
+    monkeypatch.setattr(scoring, "kstep_block_mse",
+                        lambda pb, eta, horizon, block: (np.arange(7), mse[id(pb)]))
+    sc = _scorer(2.0)
+    assert sc.consistent(small, big)[0]                      # prediction not asked
+    sc.predict_t = 2.0
+    ok, t, note = sc.consistent(small, big)
+    d = mse[id(small.problem_)] - mse[id(big.problem_)]
+    tk = d.mean() / (d.std(ddof=1) / math.sqrt(7))
+    assert not ok and t == pytest.approx(tk) and tk < -2       # the test that failed
+    assert f"6-h prediction t {tk:.1f} (needs 2), better on 1 of 7 days" in note
+    assert "daily gain t" in note and "better on 7 of 7 days" in note
+
+
+@pytest.fixture(scope="module")
+def pugh_fits():
+    """Pugh Hall testbed, 6 days: fits without and with its strongest true air path."""
+    from thermctl.data import read_measurements
+    from thermctl.estimate.likelihood import LikelihoodEstimator
+    from thermctl.network import ThermalNetwork
+    from thermctl.testbed import generate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=6, seed=0)
+        meas = read_measurements(tb.data, tb.spec)
+        a, b, d = min(tb.truth.edges, key=lambda e: e[2])
+        fits = [LikelihoodEstimator(ThermalNetwork(tb.spec, edges), per_edge=True,
+                                    max_iter=60).fit(meas) for edges in ([], [(a, b, d)])]
+    return fits
+
+
+def test_block_prediction_errors_add_up_to_kstep_errors(pugh_fits):
+    from thermctl.estimate.likelihood import kstep_errors
+    from thermctl.estimate.likelihood.kstep import kstep_block_mse
+    est = pugh_fits[0]
+    pb, eta = est.problem_, est.eta_
+    whole = kstep_errors(pb, eta, horizons=(6 * 3600.0,))
+    ids1, one = kstep_block_mse(pb, eta, 6 * 3600.0, block=1e9)      # one block: the whole run
+    assert list(ids1) == [0] and one[0] == pytest.approx(whole.rmse_mean[0] ** 2, rel=1e-12)
+    ids, day = kstep_block_mse(pb, eta, 6 * 3600.0)
+    # the first 6 h (burn-in and horizon) hold no target of day 0's start: days 0..5 scored
+    assert list(ids) == [0, 1, 2, 3, 4, 5]
+    assert day.min() < one[0] < day.max()
+
+
+def test_true_air_path_predicts_better_day_after_day(pugh_fits):
+    small, big = pugh_fits
+    sc = LikelihoodScorer.__new__(LikelihoodScorer)
+    sc.min_t, sc.block, sc.test = 0.0, 86400.0, None
+    sc.predict_t, sc.predict_horizon = 2.0, 6 * 3600.0
+    ok, _, note = sc.consistent(small, big)
+    assert ok, note
+    tk = float(note.split("6-h prediction t ")[1].split()[0])
+    assert tk > 2.0 and "better on 6 of 6 days" in note

@@ -19,6 +19,10 @@ The rules (``docs/brick.md`` has them with an example):
 * **Volumes.** ``brick:volume`` of the zone, else the sum of its rooms'; else their
   ``brick:area`` (``grossArea``, ``netArea``) times ``height``. Units ``unit:M3``/``unit:FT3``,
   ``unit:M2``/``unit:FT2`` (no unit: SI).
+* **Storeys.** A zone whose spaces are parts of one ``brick:Floor`` (``brick:hasPart`` or
+  ``brick:isPartOf``) or spaces of one ``bot:Storey`` (``bot:hasSpace``) gets that storey:
+  zones on different storeys share slabs, not doors, and no air-path candidate joins
+  them unless ``tc:airPath`` names one (a stair).
 * **Walls.** An element (``rec:Wall``, ``rec:Window``, any object of ``rec:adjacentElement``
   or ``bot:adjacentElement``) adjacent to two nodes is a wall between them; adjacent to one
   node only, or to it and ``brick:Outside``, it is an exterior element. Its area is its
@@ -297,6 +301,15 @@ def read_brick(path, *, boundary=(), height: float = DEFAULT_HEIGHT,
     in_zone = set().union(*members.values()) if members else set()
     for s in sorted(spaces - in_zone, key=str):
         members.setdefault(_local(s), set()).add(s)
+    # storeys: a brick:Floor's parts, a bot:Storey's spaces (zones on different storeys
+    # share slabs, not doors: no air-path candidate between them)
+    storey_of = {}
+    storeys = typed(("brick:Floor",)) | {s for s, c in g.subject_objects(RDF.type)
+                                         if c == _u("bot:Storey")}
+    for fl in sorted(storeys, key=str):
+        for m in (related(fl, "brick:hasPart", "brick:isPartOf")
+                  | set(g.objects(fl, _u("bot:hasSpace")))):
+            storey_of[m] = _local(fl)
     for name, ms in members.items():
         iris = {str(m) for m in ms}
         for m in ms:
@@ -420,6 +433,12 @@ def read_brick(path, *, boundary=(), height: float = DEFAULT_HEIGHT,
         caps = [_number(g, m, _u("tc:capacitance"), where) for m in ms]
         if any(c is not None for c in caps):
             entry["capacitance"] = _clean(next(c for c in caps if c is not None))
+        on = sorted({storey_of[m] for m in ms if m in storey_of})
+        if len(on) == 1:
+            entry["storey"] = on[0]
+        elif on:
+            notes.append(f"zone {name}: its spaces are on storeys {on}: no storey (air paths "
+                         "to zones on every storey are candidates)")
         zones_dict[name] = entry
         if not measured[name]:
             notes.append(f"zone {name}: no Zone_Air_Temperature_Sensor: an unmeasured zone")

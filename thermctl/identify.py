@@ -108,6 +108,11 @@ class SelectionOptions:
         likelihood gains (:meth:`~thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`),
         which holds when the model is only approximately right and BIC does not [-];
         0 turns the test off. Whole-building fits; local problems use ``split.min_t``.
+    predict_t : float
+        Consistency in prediction: the t statistic of an edge's daily reduction of the
+        6-h-ahead prediction error from filtered states [-]; 0 (default) turns it off.
+        Whole-building fits. A coupling that helps the likelihood one step ahead but not
+        the hours an MPC looks ahead goes (docs/identification.md, "Prediction day by day").
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the
@@ -129,6 +134,7 @@ class SelectionOptions:
     criterion: str = "bic"
     margin: float = 10.0
     min_t: float = 0.0
+    predict_t: float = 0.0
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0
@@ -139,6 +145,9 @@ class SelectionOptions:
         _one_of("selection", "criterion", self.criterion, ("bic", "aic", "holdout"))
         if not self.min_t >= 0:
             raise DataError(f"identify option selection.min_t must be >= 0, found {self.min_t}")
+        if not self.predict_t >= 0:
+            raise DataError(f"identify option selection.predict_t must be >= 0, found "
+                            f"{self.predict_t}")
         if not (isinstance(self.stability, (int, np.integer)) and self.stability >= 0):
             raise DataError(f"identify option selection.stability must be an integer >= 0 "
                             f"(resamples), found {self.stability!r}")
@@ -1042,7 +1051,8 @@ def _scorer_options(opt) -> dict:
     """What the selection's :class:`LikelihoodScorer` is asked (criterion, day-by-day test,
     solar term, model options)."""
     return dict(criterion=opt.selection.criterion, min_t=opt.selection.min_t,
-                solar=opt.estimation.solar, **_mass_options(opt))
+                predict_t=opt.selection.predict_t, solar=opt.estimation.solar,
+                **_mass_options(opt))
 
 
 def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):

@@ -99,7 +99,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      holdout: float = 0.3, final_per_edge: bool = False,
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
-                     min_t: float = 0.0, workers: int = 1, ahead=None,
+                     min_t: float = 0.0, predict_t: float = 0.0, workers: int = 1, ahead=None,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -154,6 +154,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     min_t : float
         An edge's gain must also hold day by day: the t statistic of its daily likelihood
         gains (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
+    predict_t : float
+        And in prediction: the t statistic of its daily reduction of the 6-h-ahead
+        prediction error (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
     workers : int
         Trial fits of a backward step side by side, in threads
         (:meth:`LikelihoodScorer.fit_many`); the selection is the same as with 1.
@@ -176,7 +179,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     cands = as_candidates(spec, candidates)
     by_name = {c.name: c for c in cands}
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
-                              max_iter=max_iter, on_fit=on_fit, min_t=min_t, **estimator_kwargs)
+                              max_iter=max_iter, on_fit=on_fit, min_t=min_t,
+                              predict_t=predict_t, **estimator_kwargs)
     if ahead is not None:
         scorer.adopt(ahead)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]

@@ -116,6 +116,10 @@ def identify(
                                 "building: t statistic of its daily likelihood gains an edge "
                                 "must reach as well (holds under model misfit, unlike BIC); 0: "
                                 "off (local problems: --local-min-t)."),
+    predict_t: float = typer.Option(_D.selection.predict_t, "--predict-t", min=0.0,
+                                    help="--selection model, whole building: t statistic of "
+                                    "an edge's daily reduction of the 6-h-ahead prediction "
+                                    "error it must reach as well; 0: off."),
     stability: int = typer.Option(_D.selection.stability, "--stability", min=0,
                                   help="--selection model: stability selection with this many "
                                   "resamples of half the calibration days (blocks of 2 days); "
@@ -219,7 +223,7 @@ def identify(
                                    allow_parallel=allow_parallel, scope=scope),
         selection=SelectionOptions(method=selection, candidates=candidates,
                                    criterion=selection_criterion, margin=margin,
-                                   min_t=min_t, stability=stability,
+                                   min_t=min_t, predict_t=predict_t, stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,

@@ -21,7 +21,7 @@ import numpy as np
 from ..._blas import single_thread_blas
 from ...errors import DataError
 
-__all__ = ["KStepResult", "filtered_states", "kstep_errors"]
+__all__ = ["KStepResult", "filtered_states", "kstep_errors", "kstep_block_mse"]
 
 
 @dataclass
@@ -114,22 +114,56 @@ def kstep_errors(problem, eta, horizons=(3600.0, 6 * 3600.0, 24 * 3600.0), strid
     -------
     KStepResult
     """
+    sse, se, cnt = _kstep_sums(problem, eta, horizons, stride, rows, block=None)
+    sse, se, cnt = sse[:, 0], se[:, 0], cnt[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rmse = np.sqrt(sse / cnt[:, None])
+        bias = se / cnt[:, None]
+    return KStepResult(np.asarray(horizons, float), list(problem.data.zones), rmse, bias, cnt)
+
+
+def kstep_block_mse(problem, eta, horizon: float = 6 * 3600.0, stride: float | None = 3600.0,
+                    block: float = 86400.0) -> tuple[np.ndarray, np.ndarray]:
+    """Mean squared ``horizon``-ahead prediction error per time block (day), over all zones.
+
+    The same predictions as :func:`kstep_errors`, grouped by the block of the row they
+    predict: what a day-by-day comparison of two models' predictions needs.
+
+    Returns
+    -------
+    ids : ndarray of int
+        Block numbers (row // rows per block) with at least one scored prediction.
+    mse : ndarray
+        Mean squared error of those blocks' predictions [K²].
+    """
+    sse, _, cnt = _kstep_sums(problem, eta, (horizon,), stride, "all", block=block)
+    tot, n = sse[0].sum(axis=1), cnt[0] * problem.ny       # squared errors, zone values
+    ids = np.flatnonzero(n > 0)
+    return ids, tot[ids] / n[ids]
+
+
+def _kstep_sums(problem, eta, horizons, stride, rows, block):
+    """Sums of squared and plain errors per horizon, block and zone, and counts per
+    horizon and block (``block=None``: one block)."""
     dt = problem.data.dt
     hs = np.array([int(round(h / dt)) for h in horizons])
     if np.any(hs < 1):
         raise DataError(f"horizons must be at least one step ({dt:g} s), found {list(horizons)}")
     st = max(1, int(round((stride or dt) / dt)))
+    N = len(problem.Y)
+    per = N + 1 if block is None else max(1, int(round(block / dt)))
+    nb = N // per + 1
     m = problem.matrices(eta)
     W = problem.inputs(eta)
     Phi, Gam, C = m["Phi"], m["Gamma"], problem.C
-    ny, nz = problem.ny, problem.nz
+    ny = problem.ny
     meas = problem.meas
     CT = np.zeros((ny, problem.n))
     CT[np.arange(ny), meas] = 1.0
-    sse = np.zeros((len(hs), ny))
-    se = np.zeros((len(hs), ny))
-    cnt = np.zeros(len(hs), dtype=int)
-    use = problem.fit_rows if rows == "fit" else np.ones(len(problem.Y), dtype=bool)
+    sse = np.zeros((len(hs), nb, ny))
+    se = np.zeros((len(hs), nb, ny))
+    cnt = np.zeros((len(hs), nb), dtype=int)
+    use = problem.fit_rows if rows == "fit" else np.ones(N, dtype=bool)
     with single_thread_blas():
         for a, b, Xp, Xf, E in filtered_states(problem, eta):
             starts = np.arange(a + problem.burn, b - 1, st)
@@ -152,10 +186,8 @@ def kstep_errors(problem, eta, horizons=(3600.0, 6 * 3600.0, 24 * 3600.0), strid
                     if not ok.any():
                         continue
                     err = (C @ X[:, ok]).T - problem.Y[tgt[ok]]
-                    sse[q] += np.sum(err ** 2, axis=0)
-                    se[q] += np.sum(err, axis=0)
-                    cnt[q] += int(ok.sum())
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rmse = np.sqrt(sse / cnt[:, None])
-        bias = se / cnt[:, None]
-    return KStepResult(np.asarray(horizons, float), list(problem.data.zones), rmse, bias, cnt)
+                    blk = tgt[ok] // per
+                    np.add.at(sse[q], blk, err ** 2)
+                    np.add.at(se[q], blk, err)
+                    np.add.at(cnt[q], blk, 1)
+    return sse, se, cnt
