@@ -159,8 +159,12 @@ def test_prediction_test_drops_a_gain_that_does_not_predict(monkeypatch):
     big = _fitted(np.full(7, 100.0) - [10.0, 9.0, 11.0, 10.0, 12.0, 9.0, 10.0])
     mse = {id(small.problem_): np.full(7, 0.10),
            id(big.problem_): np.array([0.11, 0.12, 0.105, 0.09, 0.13, 0.115, 0.12])}
-    monkeypatch.setattr(scoring, "kstep_block_mse",
-                        lambda pb, eta, horizon, block: (np.arange(7), mse[id(pb)]))
+    calls = []
+
+    def block_mse(pb, eta, horizon, block):
+        calls.append(id(pb))
+        return np.arange(7), mse[id(pb)]
+    monkeypatch.setattr(scoring, "kstep_block_mse", block_mse)
     sc = _scorer(2.0)
     assert sc.consistent(small, big)[0]                      # prediction not asked
     sc.predict_t = 2.0
@@ -170,6 +174,8 @@ def test_prediction_test_drops_a_gain_that_does_not_predict(monkeypatch):
     assert not ok and t == pytest.approx(tk) and tk < -2       # the test that failed
     assert f"6-h prediction t {tk:.1f} (needs 2), better on 1 of 7 days" in note
     assert "daily gain t" in note and "better on 7 of 7 days" in note
+    # asked again (a backward step tests every trial against the same model): no new work
+    assert sc.consistent(small, big)[2] == note and len(calls) == 2
 
 
 @pytest.fixture(scope="module")
