@@ -373,3 +373,22 @@ def test_one_sided_matches_paths_within_a_group_only(small_spec):
     # a failed problem is not asked, and a path already tested there is not asked again
     res[[p.zone for p in probs].index("r3")].confirmed["air:r1-r3"] = (False, 5.0, 0.1, "", 0.0)
     assert one_sided(probs, res) == {}
+
+
+def test_local_problems_offer_no_air_path_through_a_slab():
+    """Two storeys: each office's local problem holds the office above or below (a slab
+    joins them, its temperature an input) but offers no air path to it; its storey's
+    candidates stay."""
+    from thermctl.testbed.buildings import corridor_layout
+    spec = corridor_layout(4, floors=2, seed=0).spec
+    probs = local_problems(spec)
+    storey = {z.name: z.storey for z in spec.zones}
+    assert len(probs) == 16
+    for p in probs:
+        above_below = {w.b if w.a == p.zone else w.a for w in spec.walls
+                       if p.zone in (w.a, w.b) and {w.a, w.b} <= set(storey)
+                       and storey[w.a] != storey[w.b]}
+        assert len(above_below) == 1                     # the office stacked on it
+        assert above_below <= set(p.spec.boundary) | set(p.spec.zone_names)
+        assert p.candidates and all(storey[a] == storey[b] for a, b, _ in p.candidates)
+        assert p.spec.zone(p.zone).storey == storey[p.zone]
