@@ -220,7 +220,7 @@ def main(argv=None):
     ap.add_argument("--selection", metavar="CANDIDATES:CRITERION",
                     help="identify's --candidates and --selection-criterion, e.g. all:holdout "
                          "(case names get ' [all:holdout]')")
-    ap.add_argument("--predict-t", type=float, default=0.0, metavar="T",
+    ap.add_argument("--predict-t", type=float, default=None, metavar="T",
                     help="identify's --predict-t (case names get ' [predict T]')")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
@@ -260,7 +260,7 @@ def main(argv=None):
             cand, _, crit = args.selection.partition(":")
             sel = dict(candidates=cand, criterion=crit or "bic")
             name += f" [{args.selection}]"
-        if args.predict_t > 0:
+        if args.predict_t is not None:
             sel["predict_t"] = args.predict_t
             name += f" [predict {args.predict_t:g}]"
         row = run_case(study, name, kw, seed, days, estimation=est, selection=sel)

@@ -28,7 +28,7 @@ def _fitted(day_nll):
 def _scorer(min_t):
     sc = LikelihoodScorer.__new__(LikelihoodScorer)   # no data needed for consistent()
     sc.min_t, sc.block, sc.test = min_t, 86400.0, None
-    sc.predict_t, sc.predict_horizon = 0.0, 6 * 3600.0
+    sc.predict_t, sc.predict_horizon = None, 6 * 3600.0
     return sc
 
 
@@ -176,6 +176,16 @@ def test_prediction_test_drops_a_gain_that_does_not_predict(monkeypatch):
     assert "daily gain t" in note and "better on 7 of 7 days" in note
     # asked again (a backward step tests every trial against the same model): no new work
     assert sc.consistent(small, big)[2] == note and len(calls) == 2
+    # -2 is a veto: predictions worse day after day (t < -2) still fail...
+    sc.predict_t = -2.0
+    assert not sc.consistent(small, big)[0]
+    # ...a gain that is merely uncertain (better on 4 of 7 days, t 0.3) passes
+    mse[id(big.problem_)] = np.array([0.09, 0.11, 0.095, 0.105, 0.09, 0.115, 0.095])
+    d = mse[id(small.problem_)] - mse[id(big.problem_)]
+    assert abs(d.mean() / (d.std(ddof=1) / math.sqrt(7))) < 1
+    small.__dict__.pop("_block_mse"), big.__dict__.pop("_block_mse")     # new numbers
+    ok, _, note = sc.consistent(small, big)
+    assert ok and "(needs -2), better on 4 of 7 days" in note
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ disk is :mod:`thermctl.outputs`' job.
 from __future__ import annotations
 
 import logging
+import math
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -108,10 +109,12 @@ class SelectionOptions:
         likelihood gains (:meth:`~thermctl.estimate.likelihood.scoring.LikelihoodScorer.consistent`),
         which holds when the model is only approximately right and BIC does not [-];
         0 turns the test off. Whole-building fits; local problems use ``split.min_t``.
-    predict_t : float
+    predict_t : float or None
         Consistency in prediction: the t statistic of an edge's daily reduction of the
-        6-h-ahead prediction error from filtered states [-]; 0 (default) turns it off.
-        Whole-building fits. A coupling that helps the likelihood one step ahead but not
+        6-h-ahead prediction error from filtered states that it must reach [-]; None
+        (default): not tested. A negative value is a veto only: ``-2`` removes an edge that
+        makes the predictions worse day after day and keeps one whose gain is merely
+        uncertain. Whole-building fits. A coupling that helps the likelihood one step ahead but not
         the hours an MPC looks ahead goes (docs/identification.md, "Prediction day by day").
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
@@ -134,7 +137,7 @@ class SelectionOptions:
     criterion: str = "bic"
     margin: float = 10.0
     min_t: float = 0.0
-    predict_t: float = 0.0
+    predict_t: float | None = None
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0
@@ -145,9 +148,9 @@ class SelectionOptions:
         _one_of("selection", "criterion", self.criterion, ("bic", "aic", "holdout"))
         if not self.min_t >= 0:
             raise DataError(f"identify option selection.min_t must be >= 0, found {self.min_t}")
-        if not self.predict_t >= 0:
-            raise DataError(f"identify option selection.predict_t must be >= 0, found "
-                            f"{self.predict_t}")
+        if self.predict_t is not None and not math.isfinite(self.predict_t):
+            raise DataError(f"identify option selection.predict_t must be a number or None, "
+                            f"found {self.predict_t}")
         if not (isinstance(self.stability, (int, np.integer)) and self.stability >= 0):
             raise DataError(f"identify option selection.stability must be an integer >= 0 "
                             f"(resamples), found {self.stability!r}")

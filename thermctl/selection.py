@@ -99,7 +99,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      holdout: float = 0.3, final_per_edge: bool = False,
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
-                     min_t: float = 0.0, predict_t: float = 0.0, workers: int = 1, ahead=None,
+                     min_t: float = 0.0, predict_t: float | None = None, workers: int = 1, ahead=None,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -154,9 +154,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     min_t : float
         An edge's gain must also hold day by day: the t statistic of its daily likelihood
         gains (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
-    predict_t : float
+    predict_t : float or None
         And in prediction: the t statistic of its daily reduction of the 6-h-ahead
-        prediction error (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
+        prediction error (:meth:`LikelihoodScorer.consistent`) [-]; None: not tested.
     workers : int
         Trial fits of a backward step side by side, in threads
         (:meth:`LikelihoodScorer.fit_many`); the selection is the same as with 1.

@@ -116,10 +116,12 @@ def identify(
                                 "building: t statistic of its daily likelihood gains an edge "
                                 "must reach as well (holds under model misfit, unlike BIC); 0: "
                                 "off (local problems: --local-min-t)."),
-    predict_t: float = typer.Option(_D.selection.predict_t, "--predict-t", min=0.0,
-                                    help="--selection model, whole building: t statistic of "
-                                    "an edge's daily reduction of the 6-h-ahead prediction "
-                                    "error it must reach as well; 0: off."),
+    predict_t: float | None = typer.Option(_D.selection.predict_t, "--predict-t",
+                                           help="--selection model, whole building: t "
+                                           "statistic of an edge's daily reduction of the "
+                                           "6-h-ahead prediction error it must reach as well "
+                                           "(default: not tested; -2: a veto on edges that "
+                                           "predict worse day after day)."),
     stability: int = typer.Option(_D.selection.stability, "--stability", min=0,
                                   help="--selection model: stability selection with this many "
                                   "resamples of half the calibration days (blocks of 2 days); "

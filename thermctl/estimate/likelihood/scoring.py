@@ -71,10 +71,10 @@ class LikelihoodScorer:
         its daily likelihood gains [-]; 0: reported, not required.
     block : float
         Length of the blocks of that test [s] (a day: the gains' own period).
-    predict_t : float
+    predict_t : float or None
         Consistency an air path must show in prediction: the t statistic of its daily
         reduction of the ``predict_horizon``-ahead prediction error (:meth:`consistent`)
-        [-]; 0: not tested.
+        [-]; None: not tested. Negative: a veto on paths that predict worse.
     predict_horizon : float
         [s]
     **estimator_kwargs
@@ -88,7 +88,7 @@ class LikelihoodScorer:
 
     def __init__(self, spec, data, criterion: str = "bic", holdout: float = 0.3,
                  screen: str = "grid", max_iter: int = 200, tol: float = 1e-9, on_fit=None,
-                 min_t: float = 0.0, block: float = 86400.0, predict_t: float = 0.0,
+                 min_t: float = 0.0, block: float = 86400.0, predict_t: float | None = None,
                  predict_horizon: float = 6 * 3600.0, **estimator_kwargs):
         if criterion not in CRITERIA:
             raise EstimationError(f"criterion must be one of {CRITERIA}, found {criterion!r}")
@@ -104,7 +104,7 @@ class LikelihoodScorer:
         self.on_fit = on_fit
         self.min_t = float(min_t)
         self.block = float(block)
-        self.predict_t = float(predict_t)
+        self.predict_t = None if predict_t is None else float(predict_t)
         self.predict_horizon = float(predict_horizon)
         self.n_fits = 0
         self._count = threading.Lock()
@@ -245,7 +245,7 @@ class LikelihoodScorer:
         g = self._daily_gains(small, big)
         t, note = _day_t(g, self.min_t, "daily gain")
         ok = self.min_t <= 0 or not t < self.min_t
-        if self.predict_t > 0:
+        if self.predict_t is not None:
             tk, note_k = _day_t(self._daily_prediction_gains(small, big), self.predict_t,
                                 f"{self.predict_horizon / 3600:g}-h prediction")
             if ok and tk < self.predict_t:
@@ -405,7 +405,7 @@ def _day_t(g, need: float, what: str) -> tuple[float, str]:
         return float("nan"), f"{what}: {D} day(s), too few to test consistency"
     sd = float(np.std(g, ddof=1))
     t = math.inf if sd == 0.0 else float(np.mean(g)) / (sd / math.sqrt(D))
-    req = f" (needs {need:g})" if need > 0 else ""
+    req = f" (needs {need:g})" if need else ""
     return t, f"{what} t {t:.1f}{req}, better on {int(np.sum(g > 0))} of {D} days"
 
 
