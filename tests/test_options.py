@@ -34,6 +34,8 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", internal_mass=True)),
      "internal_mass needs a Kalman criterion"),
     (IdentifyOptions(selection=SelectionOptions(min_t=-1.0)), "selection.min_t"),
+    (IdentifyOptions(selection=SelectionOptions(predict_t=float("nan"))), "selection.predict_t"),
+    (IdentifyOptions(selection=SelectionOptions(predict_t="2")), "selection.predict_t"),
     (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", wall_factors=True)),
      "wall_factors needs a Kalman criterion"),
 ])

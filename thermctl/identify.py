@@ -148,7 +148,9 @@ class SelectionOptions:
         _one_of("selection", "criterion", self.criterion, ("bic", "aic", "holdout"))
         if not self.min_t >= 0:
             raise DataError(f"identify option selection.min_t must be >= 0, found {self.min_t}")
-        if self.predict_t is not None and not math.isfinite(self.predict_t):
+        if self.predict_t is not None and not (
+                isinstance(self.predict_t, (int, float, np.floating))
+                and not isinstance(self.predict_t, bool) and math.isfinite(self.predict_t)):
             raise DataError(f"identify option selection.predict_t must be a number or None, "
                             f"found {self.predict_t}")
         if not (isinstance(self.stability, (int, np.integer)) and self.stability >= 0):

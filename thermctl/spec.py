@@ -276,7 +276,10 @@ class BuildingSpec:
     def across_storeys(self, a: str, b: str) -> bool:
         """Whether zones ``a`` and ``b`` are on different storeys (both storeys given; a
         boundary node has none)."""
-        storey = {z.name: z.storey for z in self.zones}
+        storey = self.__dict__.get("_storeys")
+        if storey is None:      # cached: called for every wall pair (frozen dataclass)
+            storey = {z.name: z.storey for z in self.zones}
+            object.__setattr__(self, "_storeys", storey)
         sa, sb = storey.get(a), storey.get(b)
         return sa is not None and sb is not None and sa != sb
 
