@@ -114,8 +114,9 @@ class SelectionOptions:
         6-h-ahead prediction error from filtered states that it must reach [-]; None
         (default): not tested. A negative value is a veto only: ``-2`` removes an edge that
         makes the predictions worse day after day and keeps one whose gain is merely
-        uncertain. Whole-building fits. A coupling that helps the likelihood one step ahead but not
-        the hours an MPC looks ahead goes (docs/identification.md, "Prediction day by day").
+        uncertain. Whole-building fits. A coupling that helps the likelihood one step
+        ahead but not the hours an MPC looks ahead goes (docs/identification.md,
+        "Prediction day by day").
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the

@@ -302,16 +302,12 @@ class LikelihoodScorer:
         with single_thread_blas():
             ids_s, ls = small.problem_.block_nll(small.eta_, self.block)
             ids_b, lb = big.problem_.block_nll(big.eta_, self.block)
-        _, i_s, i_b = np.intersect1d(ids_s, ids_b, return_indices=True)
-        return ls[i_s] - lb[i_b]
+        return _paired_difference(ids_s, ls, ids_b, lb)
 
     def _daily_prediction_gains(self, small, big) -> np.ndarray:
         """``mse_d(small) − mse_d(big)`` of the ``predict_horizon``-ahead predictions per
         block (day) present in both [K²]."""
-        ids_s, ms = self._block_mse(small)
-        ids_b, mb = self._block_mse(big)
-        _, i_s, i_b = np.intersect1d(ids_s, ids_b, return_indices=True)
-        return ms[i_s] - mb[i_b]
+        return _paired_difference(*self._block_mse(small), *self._block_mse(big))
 
     def _block_mse(self, est):
         """:func:`kstep_block_mse` of a fitted estimator, kept on it: a backward step tests
@@ -395,6 +391,12 @@ class LikelihoodScorer:
             return est.aic_
         # held-back likelihood, scaled like -2 log L so the deltas read like AIC/BIC
         return 2.0 * est.score(self.test) * est.problem_for(self.test).n_obs
+
+
+def _paired_difference(ids_s, vs, ids_b, vb) -> np.ndarray:
+    """``vs − vb`` over the blocks present in both (block numbers ``ids_s``, ``ids_b``)."""
+    _, i_s, i_b = np.intersect1d(ids_s, ids_b, return_indices=True)
+    return vs[i_s] - vb[i_b]
 
 
 def _day_t(g, need: float, what: str) -> tuple[float, str]:
