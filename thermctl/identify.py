@@ -219,6 +219,12 @@ class EstimationOptions:
         whole-building selection; the other whole-building fits (the local path's refit,
         the paper's rule with a Kalman criterion) leave it out unless it is True. Ignored
         by ``criterion="simulation"``.
+    common_gain : int
+        Kalman criteria, whole-building fits: this many common gains, each a first-order
+        process that heats every measured zone with its own fitted loading
+        (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`): a disturbance rooms
+        feel at once, which independent gains per zone leave for air paths to explain
+        (docs/identification.md, "A disturbance that rooms share"). 0 (default): none.
     input_timing : {"auto", "held", "centred"}
         How each row's inputs (heat, supply air, solar, boundary temperatures) act on the
         step that starts at its stamp (:meth:`thermctl.data.Measurements.centred_inputs`):
@@ -243,6 +249,7 @@ class EstimationOptions:
     wall_factors: bool = False
     innovations: str = "gaussian"
     fast_gain: object = "auto"
+    common_gain: int = 0
     input_timing: str = "auto"
 
     def check(self):
@@ -252,6 +259,13 @@ class EstimationOptions:
         if self.fast_gain not in ("auto", True, False):
             raise DataError(f"identify option estimation.fast_gain must be 'auto', True or "
                             f"False (--fast-gain auto, on or off), found {self.fast_gain!r}")
+        if not (isinstance(self.common_gain, (int, np.integer))
+                and not isinstance(self.common_gain, bool) and self.common_gain >= 0):
+            raise DataError(f"identify option estimation.common_gain must be an integer >= 0, "
+                            f"found {self.common_gain!r}")
+        if self.common_gain and self.criterion == "simulation":
+            raise DataError("identify option estimation.common_gain needs a Kalman criterion "
+                            "(likelihood or kstep), not 'simulation'")
         if self.innovations != "gaussian" and self.criterion == "simulation":
             raise DataError("identify option estimation.innovations needs a Kalman criterion "
                             "(likelihood or kstep), not 'simulation'")
@@ -1050,6 +1064,8 @@ def _mass_options(opt) -> dict:
         out["innovations"] = est.innovations
     if est.fast_gain is True:       # "auto" is resolved before the fits (_resolve_fast_gain)
         out["fast_gain"] = True
+    if est.common_gain:
+        out["common_gain"] = int(est.common_gain)
     return out
 
 

@@ -102,6 +102,10 @@ def identify(
                                   "time constant fitted) beside the random walk, for "
                                   "occupancy that changes by the hour: auto (kept when it "
                                   "improves BIC by more than --margin), on or off."),
+    common_gain: int = typer.Option(_D.estimation.common_gain, "--common-gain", min=0,
+                                    help="Kalman criteria, whole-building fits: this many "
+                                    "common gains (a first-order disturbance every measured "
+                                    "zone feels, each zone with its own fitted loading)."),
     input_timing: str = typer.Option(_D.estimation.input_timing, "--input-timing",
                                      help="How a row's inputs act on the step after it: held "
                                      "(as logged: samples a controller holds), centred (the "
@@ -233,7 +237,7 @@ def identify(
                                      internal_mass=internal_mass, wall_factors=wall_factors,
                                      innovations=innovations,
                                      fast_gain=_FAST_GAIN.get(fast_gain, fast_gain),
-                                     input_timing=input_timing),
+                                     common_gain=common_gain, input_timing=input_timing),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,

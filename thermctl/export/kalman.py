@@ -97,8 +97,9 @@ def augment_noise(params: dict, A0, cz, zones, measured):
 
     The state is the network's (``n_net`` states, zones first) followed by one random-walk
     heat gain ``d[z]`` [W] per measured zone if ``sigma_phi`` is given, the AR(1) sensor
-    errors ``e[z]`` [K] if ``sigma_e`` and ``tau_e`` are, and the fast (first-order) gains
-    ``g[z]`` [W] if ``sigma_g`` and ``tau_g`` are. Shared by :func:`kalman_filter`
+    errors ``e[z]`` [K] if ``sigma_e`` and ``tau_e`` are, the fast (first-order) gains
+    ``g[z]`` [W] if ``sigma_g`` and ``tau_g`` are, and the common gains ``c1``, ``c2``… [-]
+    (unit variance, heating zone z by ``loading[z,ck]`` [W]) if ``tau_c`` is. Shared by :func:`kalman_filter`
     (at an operating point) and by filters whose network block changes with the supply
     flow (the MPC examples'), so the noise model is written once.
 
@@ -126,7 +127,8 @@ def augment_noise(params: dict, A0, cz, zones, measured):
     R : ndarray, shape (n_measured, n_measured)
         Sensor noise covariance [K²].
     extra : list of str
-        Names of the states after the network's (``d[z]``, then ``e[z]``, then ``g[z]``).
+        Names of the states after the network's (``d[z]``, then ``e[z]``, then ``g[z]``,
+        then ``c1``…).
     """
     p = params
     if any(k.startswith(("sigma_b", "tau_b")) for k in p):
@@ -140,7 +142,11 @@ def augment_noise(params: dict, A0, cz, zones, measured):
     has_e = "sigma_e" in p and "tau_e" in p
     has_g = "sigma_g" in p and "tau_g" in p
     nd, ne, ng = (ny if has_d else 0), (ny if has_e else 0), (ny if has_g else 0)
-    n = n_net + nd + ne + ng
+    nc = 0
+    if "tau_c" in p:
+        while any(k.startswith("loading[") and k.endswith(f",c{nc + 1}]") for k in p):
+            nc += 1
+    n = n_net + nd + ne + ng + nc
     A = np.zeros((n, n))
     A[:n_net, :n_net] = A0
     Qc = np.zeros((n, n))
@@ -170,6 +176,16 @@ def augment_noise(params: dict, A0, cz, zones, measured):
         A[k, k] = -1.0 / tau_g
         Qc[k, k] = 2.0 * sig_g ** 2 / tau_g
         extra += [f"g[{z}]" for z in measured]
+    if nc:
+        # common gains c_k: first order, unit variance; zone z gets loading[z,ck]·c_k [W]
+        tau_c = float(p["tau_c"])
+        for k in range(nc):
+            j = n_net + nd + ne + ng + k
+            for i, z in zip(mi, measured):
+                A[i, j] = float(p.get(f"loading[{z},c{k + 1}]", 0.0)) / cz[i]
+            A[j, j] = -1.0 / tau_c
+            Qc[j, j] = 2.0 / tau_c
+        extra += [f"c{k + 1}" for k in range(nc)]
     R = np.diag(_per(p, "sigma_v", measured, "every measured zone") ** 2)
     return A, C, Qc, R, extra
 
@@ -210,7 +226,8 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
     A, C, Qc, R, extra = augment_noise(p, A0, cz, net.zones, measured)
     B = np.zeros((A.shape[0], B0.shape[1]))
     B[:n_net] = B0
-    used = {k: float(v) for k, v in p.items() if k.startswith(("sigma_", "tau_e", "tau_g"))}
+    used = {k: float(v) for k, v in p.items()
+            if k.startswith(("sigma_", "tau_e", "tau_g", "tau_c", "loading["))}
     kf = KalmanFilter(states=list(net.state_names) + extra, inputs=net.input_names + dist.names,
                       outputs=[f"T[{z}]" for z in measured], A=A, B=B, C=C, Qc=Qc, R=R,
                       params=used)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ...errors import EstimationError
 from ..bounds import RBAR_BOUNDS, T_MAX, T_MIN
 
@@ -27,6 +29,17 @@ class LikelihoodOptions:
         is a level that jumps and comes back, which a random walk can only follow by
         wandering everywhere; the fast gain takes the hour-scale part, the random walk the
         slow drift.
+    common_gain : int
+        Common (factor) gains: this many first-order processes ``c_k`` of unit variance,
+        time constant ``τ_c`` (fitted, shared), each heating every measured zone with its
+        own fitted loading ``loading[z,k]`` [W] (either sign). A disturbance several rooms
+        feel at once (sun through one glazing, the ventilation supply's temperature, the
+        weather the boundary temperatures miss) makes the innovations of several zones
+        move together; with independent gains per zone only an air path between two of
+        them can explain that, so it may enter for the correlation, not for the heat it
+        carries. Measured on twin house N2 (conduction-only innovations correlated up to
+        0.55 between rooms): docs/identification.md, "A disturbance that rooms share".
+        0 (default): none.
     unmeasured_gain : bool
         Unmeasured zones (a hallway) get the time-of-day basis too (and a constant without
         random walk). Their temperature is only seen through their neighbours, so no
@@ -157,6 +170,7 @@ class LikelihoodOptions:
     per_edge: bool = False
     disturbance: str = "random_walk"
     fast_gain: bool = False
+    common_gain: int = 0
     unmeasured_gain: bool = True
     basis: str | None = None
     harmonics: int = 2
@@ -201,6 +215,10 @@ class LikelihoodOptions:
         lo, hi = self.nu_bounds
         if not 2.0 < lo < hi:
             raise EstimationError(f"nu_bounds: need 2 < lower < upper [-], found {lo}, {hi}")
+        if not (isinstance(self.common_gain, (int, np.integer)) and not isinstance(self.common_gain, bool)
+                and self.common_gain >= 0):
+            raise EstimationError(f"common_gain must be an integer >= 0 (common gains), found "
+                                  f"{self.common_gain!r}")
         if self.disturbance not in ("random_walk", "none"):
             raise EstimationError(f"disturbance must be 'random_walk' or 'none', found "
                                   f"{self.disturbance!r}")

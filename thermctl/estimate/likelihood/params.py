@@ -32,6 +32,8 @@ GROUP_UNITS = {
     "nu": "-",
     "sigma_g": "W",
     "tau_g": "s",
+    "loading": "W",
+    "tau_c": "s",
 }
 """Unit of each parameter group."""
 

@@ -116,7 +116,8 @@ class LikelihoodProblem:
         self.bnoise = self._boundary_noise_nodes()
         self.n_b = len(self.bnoise)
         self.n_g = self.ny if opt.fast_gain else 0
-        self.n = self.n_net + self.n_d + self.n_e + self.n_b + self.n_g
+        self.n_c = int(opt.common_gain)
+        self.n = self.n_net + self.n_d + self.n_e + self.n_b + self.n_g + self.n_c
         self.nw = self.nz + self.nb
         self.edges = net.convection_edges
         self.alpha = float(opt.alpha if opt.alpha is not None else net.spec.alpha())
@@ -364,6 +365,17 @@ class LikelihoodProblem:
         if self.n_g:
             self.i_sigg = lay.add(Param("sigma_g", "sigma_g", True, 50.0, 1.0, 5e3))
             self.i_taug = lay.add(Param("tau_g", "tau_g", True, 1800.0, 600.0, 6 * 3600.0))
+        self.i_load = []        # loading[z, c_k] per measured zone and common gain
+        if self.n_c:
+            self.i_tauc = lay.add(Param("tau_c", "tau_c", True, 3600.0, 600.0, 2 * 86400.0))
+            for k in range(self.n_c):
+                # not 0: the likelihood depends on the loadings through λλᵀ, so λ = 0 is a
+                # stationary point the optimiser would never leave; a second gain starts
+                # with alternating signs so that it is not the first one again
+                for j, z in enumerate(mz):
+                    l0 = 50.0 if k == 0 else 50.0 * (-1.0) ** j
+                    self.i_load.append(lay.add(Param(f"loading[{z},c{k + 1}]", "loading", False,
+                                                     l0, -5e3, 5e3, 100.0)))
         self.i_cf = []          # capacity factor per measured zone (internal_mass)
         if opt.internal_mass:
             lo_f, hi_f = opt.cap_factor_bounds
@@ -570,6 +582,22 @@ class LikelihoodProblem:
             A = ca.blockcat([[A, Eg], [ca.MX(self.n_g, n_y), -ca.MX.eye(self.n_g) / tau_g]])
             B = ca.vertcat(B, ca.MX(self.n_g, self.nw))
             diag.append(ca.repmat(2 * sig_g ** 2 / tau_g, self.n_g, 1))
+        if self.n_c:
+            # common gains c_k (unit variance): dc = −c/τ_c dt + √(2/τ_c) dW, heating
+            # measured zone z by loading[z,k]·c_k (kW inside)
+            n_y = A.shape[0]
+            tau_c = ca.exp(eta[self.i_tauc])
+            scale = self.layout.params[self.i_load[0]].scale * _KW
+            lam = ca.reshape(ca.vertcat(*[eta[i] for i in self.i_load]), self.ny, self.n_c) * scale
+            P = np.zeros((n_y, self.ny))
+            P[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
+            P = ca.DM(P)
+            if s is not None:
+                P = ca.mtimes(ca.diag(ca.vertcat(s, ca.DM.ones(n_y - n_net))), P)
+            Ec = ca.mtimes(P, lam)
+            A = ca.blockcat([[A, Ec], [ca.MX(self.n_c, n_y), -ca.MX.eye(self.n_c) / tau_c]])
+            B = ca.vertcat(B, ca.MX(self.n_c, self.nw))
+            diag.append(ca.repmat(2.0 / tau_c, self.n_c, 1))
         Sig = ca.diag(ca.vertcat(*diag))
         R = ca.diag(ca.vertcat(*[ca.exp(2 * eta[i]) for i in self.i_sv]))
         return A, B, Sig, R
@@ -597,7 +625,7 @@ class LikelihoodProblem:
                 Tz = np.full(self.nz, np.nan)
                 Tz[meas] = y_a
                 x = self.model.initial_state(Tz, w_a[self.nz:])
-                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e + self.n_b + self.n_g)]))
+                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e + self.n_b + self.n_g + self.n_c)]))
                 continue
             wbar = ca.DM(w0bar) + ca.vertcat(_KW * ca.mtimes(ThB, ca.DM(bbar)), ca.DM.zeros(self.nb))
             bvec = ca.mtimes(Bnet, wbar)
@@ -616,8 +644,9 @@ class LikelihoodProblem:
                     cap = cap * ca.exp(ca.vertcat(*[eta[i] for i in self.i_cf]))
                 phi = -imb * cap * _KW
                 x0 = ca.vertcat(x0, phi)
-            if self.n_e + self.n_b + self.n_g:
-                x0 = ca.vertcat(x0, ca.DM.zeros(self.n_e + self.n_b + self.n_g))
+            rest_n = self.n_e + self.n_b + self.n_g + self.n_c
+            if rest_n:
+                x0 = ca.vertcat(x0, ca.DM.zeros(rest_n))
             cols.append(x0)
         return ca.horzcat(*cols)
 
