@@ -217,6 +217,10 @@ def main(argv=None):
                     help="identify's innovation distribution (student: case names get ' [t]')")
     ap.add_argument("--fast-gain", action="store_true",
                     help="identify with a fast gain per zone (case names get ' [fast]')")
+    ap.add_argument("--noise", choices=["shared", "zone"], default="shared",
+                    help="identify's --noise (zone: case names get ' [noise zone]')")
+    ap.add_argument("--common-gain", type=int, default=0, metavar="N",
+                    help="identify's --common-gain (case names get ' [common N]')")
     ap.add_argument("--selection", metavar="CANDIDATES:CRITERION",
                     help="identify's --candidates and --selection-criterion, e.g. all:holdout "
                          "(case names get ' [all:holdout]')")
@@ -255,6 +259,10 @@ def main(argv=None):
             name, est["innovations"] = name + " [t]", args.innovations
         if args.fast_gain:
             name, est["fast_gain"] = name + " [fast]", True
+        if args.noise != "shared":
+            name, est["noise"] = name + f" [noise {args.noise}]", args.noise
+        if args.common_gain:
+            name, est["common_gain"] = name + f" [common {args.common_gain}]", args.common_gain
         sel = {}
         if args.selection:
             cand, _, crit = args.selection.partition(":")

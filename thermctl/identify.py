@@ -219,6 +219,12 @@ class EstimationOptions:
         whole-building selection; the other whole-building fits (the local path's refit,
         the paper's rule with a Kalman criterion) leave it out unless it is True. Ignored
         by ``criterion="simulation"``.
+    noise : {"shared", "zone"}
+        Kalman criteria, whole-building fits: one heat-noise and gain-noise intensity
+        (``σ_q``, ``σ_φ``) and sensor noise ``σ_v`` for all zones, or one per zone
+        (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`): rooms whose occupancy,
+        heater or ventilation is busier than the others' (docs/identification.md,
+        "Noise per zone").
     common_gain : int
         Kalman criteria, whole-building fits: this many common gains, each a first-order
         process that heats every measured zone with its own fitted loading
@@ -249,6 +255,7 @@ class EstimationOptions:
     wall_factors: bool = False
     innovations: str = "gaussian"
     fast_gain: object = "auto"
+    noise: str = "shared"
     common_gain: int = 0
     input_timing: str = "auto"
 
@@ -256,6 +263,7 @@ class EstimationOptions:
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
         _one_of("estimation", "input_timing", self.input_timing, INPUT_TIMINGS)
         _one_of("estimation", "innovations", self.innovations, ("gaussian", "student"))
+        _one_of("estimation", "noise", self.noise, ("shared", "zone"))
         if self.fast_gain not in ("auto", True, False):
             raise DataError(f"identify option estimation.fast_gain must be 'auto', True or "
                             f"False (--fast-gain auto, on or off), found {self.fast_gain!r}")
@@ -1066,6 +1074,8 @@ def _mass_options(opt) -> dict:
         out["fast_gain"] = True
     if est.common_gain:
         out["common_gain"] = int(est.common_gain)
+    if est.noise != "shared":
+        out["noise"] = est.noise
     return out
 
 

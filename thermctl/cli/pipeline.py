@@ -102,6 +102,9 @@ def identify(
                                   "time constant fitted) beside the random walk, for "
                                   "occupancy that changes by the hour: auto (kept when it "
                                   "improves BIC by more than --margin), on or off."),
+    noise: str = typer.Option(_D.estimation.noise, "--noise", help="Kalman criteria, "
+                              "whole-building fits: heat, gain and sensor noise shared by "
+                              "the zones, or zone (one of each per zone)."),
     common_gain: int = typer.Option(_D.estimation.common_gain, "--common-gain", min=0,
                                     help="Kalman criteria, whole-building fits: this many "
                                     "common gains (a first-order disturbance every measured "
@@ -237,7 +240,7 @@ def identify(
                                      internal_mass=internal_mass, wall_factors=wall_factors,
                                      innovations=innovations,
                                      fast_gain=_FAST_GAIN.get(fast_gain, fast_gain),
-                                     common_gain=common_gain, input_timing=input_timing),
+                                     noise=noise, common_gain=common_gain, input_timing=input_timing),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
