@@ -80,8 +80,11 @@ def expm_taylor(M, order: int = _TAYLOR_ORDER):
     n = M.shape[0]
     I = _eye(n)
     E = I + M / order
+    # E fills in after a few terms: BLAS beats CasADi's own loop on these products (twin
+    # house N2, 116 states: a likelihood gradient 0.128 → 0.095 s)
+    mt = dense_mtimes if isinstance(M, ca.MX) else ca.mtimes
     for k in range(order - 1, 0, -1):
-        E = I + ca.mtimes(M, E) / k
+        E = I + mt(M, E) / k
     return E
 
 
@@ -139,9 +142,9 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
     Z = ca.MX(n, n) if isinstance(A, ca.MX) else ca.DM(n, n)
     VL = ca.vertcat(ca.horzcat(-A * h, Sigma * h), ca.horzcat(Z, A.T * h))
     E2 = expm_taylor(VL, order)
-    Q = ca.mtimes(E2[n:, n:].T, E2[:n, n:])
-    Q = 0.5 * (Q + Q.T)
     mt = dense_mtimes if isinstance(A, ca.MX) else ca.mtimes
+    Q = mt(E2[n:, n:].T, E2[:n, n:])
+    Q = 0.5 * (Q + Q.T)
     for _ in range(squarings):
         Q = mt(mt(Phi, Q), Phi.T) + Q
         Gam = Gam + mt(Phi, Gam)
