@@ -392,3 +392,25 @@ def test_local_problems_offer_no_air_path_through_a_slab():
         assert above_below <= set(p.spec.boundary) | set(p.spec.zone_names)
         assert p.candidates and all(storey[a] == storey[b] for a, b, _ in p.candidates)
         assert p.spec.zone(p.zone).storey == storey[p.zone]
+
+
+def test_whole_building_noise_options_are_said_to_skip_the_local_problems(tmp_path):
+    """``--noise zone`` and ``--common-gain`` shape whole-building fits; on the local path a
+    note says the local problems decided without them (no silent option)."""
+    from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
+                                   SplitOptions, identify)
+    from thermctl.spec import load_spec
+    generate("corridor", zones=5, days=3, seed=5).write(tmp_path)
+    spec = load_spec(tmp_path / "building.yaml")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meas = read_measurements(tmp_path / "data.csv", spec)
+        notes = {}
+        for key, est in (("plain", {}), ("both", dict(noise="zone", common_gain=1))):
+            opt = IdentifyOptions(selection=SelectionOptions(margin=1e6),
+                                  estimation=EstimationOptions(intervals="none", **est),
+                                  split=SplitOptions(scale="local", workers=1))
+            notes[key] = identify(meas, opt).notes
+    said = [n for n in notes["both"] if "act on whole-building fits only" in n]
+    assert len(said) == 1 and "--noise zone and --common-gain 1" in said[0]
+    assert not any("act on whole-building fits only" in n for n in notes["plain"])

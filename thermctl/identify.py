@@ -778,6 +778,14 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
     """The model of combined local results: whole-building refit when small enough."""
     spec = meas.spec
     notes = []
+    est = opt.estimation
+    whole_only = [w for w, on in (("--noise zone", est.noise != "shared"),
+                                  (f"--common-gain {est.common_gain}", bool(est.common_gain)))
+                  if on]
+    if whole_only:
+        notes.append(f"{' and '.join(whole_only)} act on whole-building fits only (the refit, "
+                     f"when there is one): the local problems, one measured zone each, decide "
+                     f"the air paths without")
     logger.info("%s", li.summary())
     stab = _local_stability(li, cal, opt, progress, client, notes) \
         if opt.selection.stability else None
