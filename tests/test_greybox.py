@@ -570,3 +570,26 @@ def test_noise_per_zone_keeps_a_busy_room_from_dragging_rbar_v(net5):
     sq = {z: zone.params_[f"sigma_q[{z}]"] for z in ("r1", "r2", "r3")}
     assert max(sq, key=sq.get) == "r3" and sq["r3"] == pytest.approx(1500.0, rel=0.5)
     assert zone.nll_ < shared.nll_ - 1000                          # measured 2074 nats
+
+
+def test_an_air_path_beside_a_wall_is_compared_with_the_wall(spec5):
+    """The note of ``identify`` on air paths that run beside a wall: the path's DC
+    conductance 1/(3·R̄_v·d) against the wall's UA (r1–r2: 1/(3·3.36e-4·4) = 248 W/K against
+    1/0.14 = 7.14 W/K, 34.7×); a path with no wall beside it (r1–r3) is not listed; the
+    per-path R̄_v is used where there is one."""
+    from thermctl.identify import _beside_wall_note
+    net = ThermalNetwork(spec5, convection=[("r1", "r2"), ("r1", "r3")])
+    notes = []
+    _beside_wall_note(spec5, net, {}, RBAR_TRUE, notes)
+    assert len(notes) == 1
+    g = 1.0 / (3 * RBAR_TRUE * 4.0)
+    assert f"r1–r2 {g:.3g} W/K against {1 / 0.14:.3g} W/K ({g * 0.14:.2g}×)" in notes[0]
+    assert "r1–r3" not in notes[0]
+    name = next(e.name for e in net.convection_edges if {e.a, e.b} == {"r1", "r2"})
+    notes = []
+    _beside_wall_note(spec5, net, {name: 10 * RBAR_TRUE}, RBAR_TRUE, notes)
+    assert f"{g / 10:.3g} W/K" in notes[0]
+    notes = []
+    _beside_wall_note(spec5, ThermalNetwork(spec5, convection=[("r1", "r3")]), {}, RBAR_TRUE,
+                      notes)
+    assert notes == []
