@@ -38,6 +38,13 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(selection=SelectionOptions(predict_t="2")), "selection.predict_t"),
     (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", wall_factors=True)),
      "wall_factors needs a Kalman criterion"),
+    (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", noise="zone")),
+     "noise needs a Kalman criterion"),
+    (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", common_gain=1)),
+     "common_gain needs a Kalman criterion"),
+    (IdentifyOptions(estimation=EstimationOptions(noise="room")), "estimation.noise"),
+    (IdentifyOptions(estimation=EstimationOptions(common_gain=-1)), "estimation.common_gain"),
+    (IdentifyOptions(estimation=EstimationOptions(common_gain=True)), "estimation.common_gain"),
 ])
 def test_check_rejects_bad_and_contradictory_options_in_one_line(opt, match):
     with pytest.raises(DataError, match=match) as exc:

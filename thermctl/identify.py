@@ -271,9 +271,11 @@ class EstimationOptions:
                 and not isinstance(self.common_gain, bool) and self.common_gain >= 0):
             raise DataError(f"identify option estimation.common_gain must be an integer >= 0, "
                             f"found {self.common_gain!r}")
-        if self.common_gain and self.criterion == "simulation":
-            raise DataError("identify option estimation.common_gain needs a Kalman criterion "
-                            "(likelihood or kstep), not 'simulation'")
+        for name, on in (("common_gain", bool(self.common_gain)),
+                         ("noise", self.noise != "shared")):
+            if on and self.criterion == "simulation":
+                raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
+                                "(likelihood or kstep), not 'simulation'")
         if self.innovations != "gaussian" and self.criterion == "simulation":
             raise DataError("identify option estimation.innovations needs a Kalman criterion "
                             "(likelihood or kstep), not 'simulation'")
@@ -785,9 +787,9 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
                                   (f"--common-gain {est.common_gain}", bool(est.common_gain)))
                   if on]
     if whole_only:
-        notes.append(f"{' and '.join(whole_only)} act on whole-building fits only (the refit, "
-                     f"when there is one): the local problems, one measured zone each, decide "
-                     f"the air paths without")
+        notes.append(f"{' and '.join(whole_only)} {'act' if len(whole_only) > 1 else 'acts'} on "
+                     f"whole-building fits only (the refit, when there is one): the local "
+                     f"problems, one measured zone each, decide the air paths without")
     logger.info("%s", li.summary())
     stab = _local_stability(li, cal, opt, progress, client, notes) \
         if opt.selection.stability else None
@@ -1068,7 +1070,7 @@ def _fitted_network(gb):
 
 def _mass_options(opt) -> dict:
     """Likelihood options of ``estimation.internal_mass``, ``wall_factors``,
-    ``innovations`` and ``fast_gain``; with the factors
+    ``innovations``, ``fast_gain``, ``common_gain`` and ``noise``; with the factors
     and every row, since only rows with known supply heat fix a zone's capacity or a wall's
     UA (on the supply-off rows of the closed-loop testbed the capacity factor drifts to
     10–30 with or without extra mass)."""

@@ -63,6 +63,10 @@ _MEANING = {
     "tau_e": "time constant of the coloured measurement noise",
     "sigma_b": "slow shared disturbance (std)",
     "tau_b": "time constant of the slow shared disturbance",
+    "sigma_g": "fast (first-order) gain per zone (std)",
+    "tau_g": "time constant of the fast gains",
+    "loading": "heat of a common gain in a zone (zone, gain)",
+    "tau_c": "time constant of the common gains",
     "aperture": "solar aperture (zone, solar column)",
     "gain": "time-of-day gain level (zone, basis)",
 }

@@ -196,8 +196,9 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
     Built from ``model.meta["greybox"]["params"]`` (:func:`augment_noise`): ``sigma_q``
     (heat noise per zone [W s^0.5], intensity ``(σ_q/C_z)²`` on ``T[z]``), ``sigma_phi``
     (random-walk gain per measured zone [W/s^0.5]), ``sigma_v`` (sensor noise [K]) and, if
-    identified, the AR(1) sensor error ``sigma_e`` [K], ``tau_e`` [s]. Each is shared or per
-    zone (``sigma_q[r1]``). Models identified with ``--criterion simulation`` have no noise
+    identified, the AR(1) sensor error ``sigma_e`` [K], ``tau_e`` [s], the fast gains
+    (``sigma_g`` [W], ``tau_g`` [s]) and the common gains (``tau_c`` [s], ``loading[z,ck]``
+    [W]). Each noise level is shared or per zone (``sigma_q[r1]``). Models identified with ``--criterion simulation`` have no noise
     model.
 
     Parameters

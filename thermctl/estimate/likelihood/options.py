@@ -32,7 +32,9 @@ class LikelihoodOptions:
     common_gain : int
         Common (factor) gains: this many first-order processes ``c_k`` of unit variance,
         time constant ``τ_c`` (fitted, shared), each heating every measured zone with its
-        own fitted loading ``loading[z,k]`` [W] (either sign). A disturbance several rooms
+        own fitted loading ``loading[z,ck]`` [W] (either sign). Gain k has no loading on the
+        first k measured zones: with a shared τ_c the data see the loadings only through
+        λλᵀ, and this (lower-triangular) choice makes them one solution up to signs. A disturbance several rooms
         feel at once (sun through one glazing, the ventilation supply's temperature, the
         weather the boundary temperatures miss) makes the innovations of several zones
         move together; with independent gains per zone only an air path between two of

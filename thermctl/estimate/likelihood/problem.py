@@ -365,17 +365,22 @@ class LikelihoodProblem:
         if self.n_g:
             self.i_sigg = lay.add(Param("sigma_g", "sigma_g", True, 50.0, 1.0, 5e3))
             self.i_taug = lay.add(Param("tau_g", "tau_g", True, 1800.0, 600.0, 6 * 3600.0))
-        self.i_load = []        # loading[z, c_k] per measured zone and common gain
+        self.i_load = []        # (zone j, gain k, parameter index) of loading[z,ck]
         if self.n_c:
             self.i_tauc = lay.add(Param("tau_c", "tau_c", True, 3600.0, 600.0, 2 * 86400.0))
             for k in range(self.n_c):
-                # not 0: the likelihood depends on the loadings through λλᵀ, so λ = 0 is a
-                # stationary point the optimiser would never leave; a second gain starts
-                # with alternating signs so that it is not the first one again
+                # the gains share τ_c and unit variance, so the likelihood sees the loadings
+                # only through λλᵀ: any rotation of λ's columns fits alike. Gain k has no
+                # loading on the first k measured zones (a lower-triangular λ, the usual
+                # factor-analysis choice), which leaves one λ per λλᵀ up to signs.
+                # Start values not 0: λ = 0 is a stationary point the optimiser would not
+                # leave; alternating signs keep a second gain off the first one's direction.
                 for j, z in enumerate(mz):
+                    if j < k:
+                        continue
                     l0 = 50.0 if k == 0 else 50.0 * (-1.0) ** j
-                    self.i_load.append(lay.add(Param(f"loading[{z},c{k + 1}]", "loading", False,
-                                                     l0, -5e3, 5e3, 100.0)))
+                    self.i_load.append((j, k, lay.add(Param(f"loading[{z},c{k + 1}]", "loading",
+                                                            False, l0, -5e3, 5e3, 100.0))))
         self.i_cf = []          # capacity factor per measured zone (internal_mass)
         if opt.internal_mass:
             lo_f, hi_f = opt.cap_factor_bounds
@@ -584,11 +589,15 @@ class LikelihoodProblem:
             diag.append(ca.repmat(2 * sig_g ** 2 / tau_g, self.n_g, 1))
         if self.n_c:
             # common gains c_k (unit variance): dc = −c/τ_c dt + √(2/τ_c) dW, heating
-            # measured zone z by loading[z,k]·c_k (kW inside)
+            # measured zone z by loading[z,ck]·c_k (kW inside)
             n_y = A.shape[0]
             tau_c = ca.exp(eta[self.i_tauc])
-            scale = self.layout.params[self.i_load[0]].scale * _KW
-            lam = ca.reshape(ca.vertcat(*[eta[i] for i in self.i_load]), self.ny, self.n_c) * scale
+            scale = self.layout.params[self.i_load[0][2]].scale * _KW
+            Sel = np.zeros((self.ny * self.n_c, len(self.i_load)))
+            for col, (j, k, _) in enumerate(self.i_load):
+                Sel[j + self.ny * k, col] = scale
+            lam = ca.reshape(ca.mtimes(ca.DM(Sel), ca.vertcat(*[eta[i] for _, _, i in self.i_load])),
+                             self.ny, self.n_c)
             P = np.zeros((n_y, self.ny))
             P[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
             P = ca.DM(P)
