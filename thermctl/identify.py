@@ -224,13 +224,14 @@ class EstimationOptions:
         (``σ_q``, ``σ_φ``) and sensor noise ``σ_v`` for all zones, or one per zone
         (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`): rooms whose occupancy,
         heater or ventilation is busier than the others' (docs/identification.md,
-        "Noise per zone").
+        "A busy room, or a disturbance rooms share").
     common_gain : int
         Kalman criteria, whole-building fits: this many common gains, each a first-order
         process that heats every measured zone with its own fitted loading
         (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`): a disturbance rooms
         feel at once, which independent gains per zone leave for air paths to explain
-        (docs/identification.md, "A disturbance that rooms share"). 0 (default): none.
+        (docs/identification.md, "A busy room, or a disturbance rooms share"). 0 (default):
+        none.
     input_timing : {"auto", "held", "centred"}
         How each row's inputs (heat, supply air, solar, boundary temperatures) act on the
         step that starts at its stamp (:meth:`thermctl.data.Measurements.centred_inputs`):

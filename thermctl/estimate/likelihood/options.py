@@ -32,16 +32,15 @@ class LikelihoodOptions:
     common_gain : int
         Common (factor) gains: this many first-order processes ``c_k`` of unit variance,
         time constant ``τ_c`` (fitted, shared), each heating every measured zone with its
-        own fitted loading ``loading[z,ck]`` [W] (either sign). Gain k has no loading on the
-        first k measured zones: with a shared τ_c the data see the loadings only through
-        λλᵀ, and this (lower-triangular) choice makes them one solution up to signs. A disturbance several rooms
+        own fitted loading ``loading[z,ck]`` [W] (either sign). A disturbance several rooms
         feel at once (sun through one glazing, the ventilation supply's temperature, the
-        weather the boundary temperatures miss) makes the innovations of several zones
-        move together; with independent gains per zone only an air path between two of
-        them can explain that, so it may enter for the correlation, not for the heat it
-        carries. Measured on twin house N2 (conduction-only innovations correlated up to
-        0.55 between rooms): docs/identification.md, "A disturbance that rooms share".
-        0 (default): none.
+        weather the boundary temperatures miss) makes their innovations move together;
+        with independent gains per zone only an air path can explain that. Gain k has no
+        loading on the first k measured zones: with a shared τ_c the data see the loadings
+        only through λλᵀ, and this lower-triangular choice leaves one solution up to signs.
+        Measured (docs/identification.md, "A busy room, or a disturbance rooms share"): on
+        the twin house and the testbed one gain loads on one or two rooms (a slow extra
+        gain for the busiest room), and it changes no selected path. 0 (default): none.
     unmeasured_gain : bool
         Unmeasured zones (a hallway) get the time-of-day basis too (and a constant without
         random walk). Their temperature is only seen through their neighbours, so no
@@ -217,8 +216,8 @@ class LikelihoodOptions:
         lo, hi = self.nu_bounds
         if not 2.0 < lo < hi:
             raise EstimationError(f"nu_bounds: need 2 < lower < upper [-], found {lo}, {hi}")
-        if not (isinstance(self.common_gain, (int, np.integer)) and not isinstance(self.common_gain, bool)
-                and self.common_gain >= 0):
+        if not (isinstance(self.common_gain, (int, np.integer))
+                and not isinstance(self.common_gain, bool) and self.common_gain >= 0):
             raise EstimationError(f"common_gain must be an integer >= 0 (common gains), found "
                                   f"{self.common_gain!r}")
         if self.disturbance not in ("random_walk", "none"):

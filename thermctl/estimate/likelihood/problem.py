@@ -596,8 +596,8 @@ class LikelihoodProblem:
             Sel = np.zeros((self.ny * self.n_c, len(self.i_load)))
             for col, (j, k, _) in enumerate(self.i_load):
                 Sel[j + self.ny * k, col] = scale
-            lam = ca.reshape(ca.mtimes(ca.DM(Sel), ca.vertcat(*[eta[i] for _, _, i in self.i_load])),
-                             self.ny, self.n_c)
+            vals = ca.vertcat(*[eta[i] for _, _, i in self.i_load])
+            lam = ca.reshape(ca.mtimes(ca.DM(Sel), vals), self.ny, self.n_c)
             P = np.zeros((n_y, self.ny))
             P[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
             P = ca.DM(P)
@@ -634,7 +634,8 @@ class LikelihoodProblem:
                 Tz = np.full(self.nz, np.nan)
                 Tz[meas] = y_a
                 x = self.model.initial_state(Tz, w_a[self.nz:])
-                cols.append(ca.DM(np.r_[x, np.zeros(self.n_d + self.n_e + self.n_b + self.n_g + self.n_c)]))
+                extra = self.n_d + self.n_e + self.n_b + self.n_g + self.n_c
+                cols.append(ca.DM(np.r_[x, np.zeros(extra)]))
                 continue
             wbar = ca.DM(w0bar) + ca.vertcat(_KW * ca.mtimes(ThB, ca.DM(bbar)), ca.DM.zeros(self.nb))
             bvec = ca.mtimes(Bnet, wbar)
