@@ -1355,7 +1355,7 @@ def _beside_wall_note(spec, net, per_edge: dict, rbar_v: float, notes) -> None:
         ua = sum(1.0 / sum(w.R) for w in spec.walls if {w.a, w.b} == {e.a, e.b})
         if ua <= 0 or not e.d:
             continue
-        rb = per_edge.get(e.name, rbar_v) if per_edge else rbar_v
+        rb = (per_edge or {}).get(e.name, rbar_v)
         if not (rb and np.isfinite(rb)):
             continue
         g = 1.0 / (3.0 * rb * e.d)

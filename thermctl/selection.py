@@ -99,8 +99,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      holdout: float = 0.3, final_per_edge: bool = False,
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
-                     min_t: float = 0.0, predict_t: float | None = None, workers: int = 1, ahead=None,
-                     **estimator_kwargs) -> SelectionResult:
+                     min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
+                     ahead=None, **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters

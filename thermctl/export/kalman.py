@@ -99,9 +99,9 @@ def augment_noise(params: dict, A0, cz, zones, measured):
     heat gain ``d[z]`` [W] per measured zone if ``sigma_phi`` is given, the AR(1) sensor
     errors ``e[z]`` [K] if ``sigma_e`` and ``tau_e`` are, the fast (first-order) gains
     ``g[z]`` [W] if ``sigma_g`` and ``tau_g`` are, and the common gains ``c1``, ``c2``… [-]
-    (unit variance, heating zone z by ``loading[z,ck]`` [W]) if ``tau_c`` is. Shared by :func:`kalman_filter`
-    (at an operating point) and by filters whose network block changes with the supply
-    flow (the MPC examples'), so the noise model is written once.
+    (unit variance, heating zone z by ``loading[z,ck]`` [W]) if ``tau_c`` is. Shared by
+    :func:`kalman_filter` (at an operating point) and by filters whose network block changes
+    with the supply flow (the MPC examples'), so the noise model is written once.
 
     Parameters
     ----------
@@ -198,8 +198,8 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
     (random-walk gain per measured zone [W/s^0.5]), ``sigma_v`` (sensor noise [K]) and, if
     identified, the AR(1) sensor error ``sigma_e`` [K], ``tau_e`` [s], the fast gains
     (``sigma_g`` [W], ``tau_g`` [s]) and the common gains (``tau_c`` [s], ``loading[z,ck]``
-    [W]). Each noise level is shared or per zone (``sigma_q[r1]``). Models identified with ``--criterion simulation`` have no noise
-    model.
+    [W]). Each noise level is shared or per zone (``sigma_q[r1]``). Models identified with
+    ``--criterion simulation`` have no noise model.
 
     Parameters
     ----------

@@ -543,12 +543,28 @@ class LikelihoodProblem:
             # heat-noise inputs by 1/f_z
             Sd = ca.diag(s)
             A, B, Bt = ca.mtimes(Sd, A), ca.mtimes(Sd, B), ca.mtimes(Sd, Bt)
+
+        def to_zones(n_y):
+            """(n_y, measured zones): a heat [kW] into each measured zone's temperature,
+            divided by its capacitance (times its factor)."""
+            P = np.zeros((n_y, self.ny))
+            P[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
+            P = ca.DM(P)
+            if s is None:
+                return P
+            return ca.mtimes(ca.diag(ca.vertcat(s, ca.DM.ones(n_y - n_net))), P)
+
+        def first_order(A, B, E, tau, q):
+            """``A``, ``B`` with ``E.shape[1]`` first-order states appended: ``−x/τ`` each,
+            feeding the states before through ``E``, noise intensity ``q`` each."""
+            k = E.shape[1]
+            diag.append(ca.repmat(q, k, 1))
+            A = ca.blockcat([[A, E], [ca.MX(k, A.shape[0]), -ca.MX.eye(k) / tau]])
+            return A, ca.vertcat(B, ca.MX(k, self.nw))
+
         n_x = n_net + self.n_d          # states before the sensor-error block
         if self.n_d:
-            E = np.zeros((n_net, self.n_d))
-            E[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
-            E = ca.DM(E) if s is None else ca.mtimes(ca.diag(s), ca.DM(E))
-            A = ca.vertcat(ca.horzcat(A, E), ca.MX(self.n_d, n_x))
+            A = ca.vertcat(ca.horzcat(A, to_zones(n_net)), ca.MX(self.n_d, n_x))
             B = ca.vertcat(B, ca.MX(self.n_d, self.nw))
         sq = ca.vertcat(*[ca.exp(eta[i]) for i in self.i_sq]) * ca.DM(np.asarray(self.sym.inv_cz, float))
         if s is not None:
@@ -559,38 +575,23 @@ class LikelihoodProblem:
         if self.n_e:
             tau_e = ca.exp(eta[self.i_taue])
             sig_e = ca.exp(eta[self.i_sige])
-            A = ca.blockcat([[A, ca.MX(n_x, self.n_e)],
-                             [ca.MX(self.n_e, n_x), -ca.MX.eye(self.n_e) / tau_e]])
-            B = ca.vertcat(B, ca.MX(self.n_e, self.nw))
-            diag.append(ca.repmat(2 * sig_e ** 2 / tau_e, self.n_e, 1))
+            A, B = first_order(A, B, ca.MX(n_x, self.n_e), tau_e, 2 * sig_e ** 2 / tau_e)
         if self.n_b:
             # boundary temperature error b: the walls see T_b + b (sensor placement, sun
             # on the facade, gusts): a disturbance common to every zone on that boundary
-            n_y = n_x + self.n_e
             tau_b = ca.exp(eta[self.i_taub])
             sig_b = ca.exp(eta[self.i_sigb])
-            Eb = ca.vertcat(Bt[:, self.bnoise], ca.MX(n_y - n_net, self.n_b))
-            A = ca.blockcat([[A, Eb], [ca.MX(self.n_b, n_y), -ca.MX.eye(self.n_b) / tau_b]])
-            B = ca.vertcat(B, ca.MX(self.n_b, self.nw))
-            diag.append(ca.repmat(2 * sig_b ** 2 / tau_b, self.n_b, 1))
+            Eb = ca.vertcat(Bt[:, self.bnoise], ca.MX(A.shape[0] - n_net, self.n_b))
+            A, B = first_order(A, B, Eb, tau_b, 2 * sig_b ** 2 / tau_b)
         if self.n_g:
             # fast gain g (kW) per measured zone: dg = −g/τ_g dt + √(2/τ_g)·σ_g dW, heating
             # its zone like the random walk does
-            n_y = A.shape[0]
             tau_g = ca.exp(eta[self.i_taug])
             sig_g = ca.exp(eta[self.i_sigg]) * _KW
-            Eg = np.zeros((n_y, self.n_g))
-            Eg[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
-            Eg = ca.DM(Eg)
-            if s is not None:
-                Eg = ca.mtimes(ca.diag(ca.vertcat(s, ca.DM.ones(n_y - n_net))), Eg)
-            A = ca.blockcat([[A, Eg], [ca.MX(self.n_g, n_y), -ca.MX.eye(self.n_g) / tau_g]])
-            B = ca.vertcat(B, ca.MX(self.n_g, self.nw))
-            diag.append(ca.repmat(2 * sig_g ** 2 / tau_g, self.n_g, 1))
+            A, B = first_order(A, B, to_zones(A.shape[0]), tau_g, 2 * sig_g ** 2 / tau_g)
         if self.n_c:
             # common gains c_k (unit variance): dc = −c/τ_c dt + √(2/τ_c) dW, heating
             # measured zone z by loading[z,ck]·c_k (kW inside)
-            n_y = A.shape[0]
             tau_c = ca.exp(eta[self.i_tauc])
             scale = self.layout.params[self.i_load[0][2]].scale * _KW
             Sel = np.zeros((self.ny * self.n_c, len(self.i_load)))
@@ -598,15 +599,7 @@ class LikelihoodProblem:
                 Sel[j + self.ny * k, col] = scale
             vals = ca.vertcat(*[eta[i] for _, _, i in self.i_load])
             lam = ca.reshape(ca.mtimes(ca.DM(Sel), vals), self.ny, self.n_c)
-            P = np.zeros((n_y, self.ny))
-            P[self.meas, np.arange(self.ny)] = inv_cz_kw[self.meas]
-            P = ca.DM(P)
-            if s is not None:
-                P = ca.mtimes(ca.diag(ca.vertcat(s, ca.DM.ones(n_y - n_net))), P)
-            Ec = ca.mtimes(P, lam)
-            A = ca.blockcat([[A, Ec], [ca.MX(self.n_c, n_y), -ca.MX.eye(self.n_c) / tau_c]])
-            B = ca.vertcat(B, ca.MX(self.n_c, self.nw))
-            diag.append(ca.repmat(2.0 / tau_c, self.n_c, 1))
+            A, B = first_order(A, B, ca.mtimes(to_zones(A.shape[0]), lam), tau_c, 2.0 / tau_c)
         Sig = ca.diag(ca.vertcat(*diag))
         R = ca.diag(ca.vertcat(*[ca.exp(2 * eta[i]) for i in self.i_sv]))
         return A, B, Sig, R
