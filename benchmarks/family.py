@@ -226,6 +226,8 @@ def main(argv=None):
                          "(case names get ' [all:holdout]')")
     ap.add_argument("--predict-t", type=float, default=None, metavar="T",
                     help="identify's --predict-t (case names get ' [predict T]')")
+    ap.add_argument("--swaps", action="store_true",
+                    help="identify's --swaps (case names get ' [swaps]')")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
@@ -271,6 +273,9 @@ def main(argv=None):
         if args.predict_t is not None:
             sel["predict_t"] = args.predict_t
             name += f" [predict {args.predict_t:g}]"
+        if args.swaps:
+            sel["swaps"] = True
+            name += " [swaps]"
         row = run_case(study, name, kw, seed, days, estimation=est, selection=sel)
         rows.append(row)
         print(json.dumps(row), flush=True)

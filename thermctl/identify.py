@@ -117,6 +117,13 @@ class SelectionOptions:
         uncertain. Whole-building fits. A coupling that helps the likelihood one step
         ahead but not the hours an MPC looks ahead goes (docs/identification.md,
         "Prediction day by day").
+    swaps : bool
+        Whole-building fits: after the backward pass, replace a kept air path by one that
+        shares a zone with it (any pair of measured zones with a length, SIN's pick or not)
+        when that improves the criterion by more than ``margin``, then prune again
+        (:func:`thermctl.structure.search.search_edges`). Backward elimination from SIN's
+        picks keeps a substitute when the true partner of one of its zones was not
+        proposed (docs/identification.md, "Swaps").
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the
@@ -139,6 +146,7 @@ class SelectionOptions:
     margin: float = 10.0
     min_t: float = 0.0
     predict_t: float | None = None
+    swaps: bool = False
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0
@@ -697,7 +705,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
         first = cands if direction == "backward" else list(start or ())
         opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off)
         sel_kw = dict(candidates=cands, direction=direction, margin=opt.selection.margin,
-                      start=start or (), **_scorer_options(opt))
+                      start=start or (), swaps="all" if opt.selection.swaps else None,
+                      **_scorer_options(opt))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
             sel = select_air_paths(spec, cal, progress=say, on_fit=on_fit,

@@ -20,7 +20,7 @@ from .model import ConvectionParameters
 from .estimate.likelihood import LikelihoodEstimator
 from .estimate.likelihood.scoring import CRITERIA, LikelihoodScorer
 from .network import ThermalNetwork
-from .structure.search import _cand, as_candidates, search_edges
+from .structure.search import _cand, as_candidates, candidate_pairs, search_edges
 
 __all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "judge_air_paths", "CRITERIA"]
 
@@ -100,7 +100,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
-                     ahead=None, **estimator_kwargs) -> SelectionResult:
+                     ahead=None, swaps=None, **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -160,6 +160,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     workers : int
         Trial fits of a backward step side by side, in threads
         (:meth:`LikelihoodScorer.fit_many`); the selection is the same as with 1.
+    swaps : "all" or list of Candidate / (a, b[, d]), optional
+        After the backward pass, replacements of each kept edge by one of these that shares
+        a zone with it (:func:`~thermctl.structure.search.search_edges`); ``all``: every
+        pair of measured zones with a length. None: no swaps.
     ahead : LikelihoodScorer, optional
         Fits started ahead (:meth:`LikelihoodScorer.speculate`) with the same options and
         data: the search takes their results instead of fitting again
@@ -184,8 +188,11 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     if ahead is not None:
         scorer.adopt(ahead)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]
+    if isinstance(swaps, str) and swaps == "all":
+        swaps = candidate_pairs(spec, include_unmeasured=False)
+    swaps = None if swaps is None else [by_name.get(c.name, c) for c in as_candidates(spec, swaps)]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
-                       margin=margin, progress=progress, workers=workers)
+                       margin=margin, progress=progress, workers=workers, swaps=swaps)
     est, cur = res.fitted, res.edges
     per_edge = {}
     if cur:

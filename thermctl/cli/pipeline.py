@@ -90,6 +90,11 @@ def identify(
                                    "forward over all measured pairs) or all."),
     margin: float = typer.Option(_D.selection.margin, help="--selection model: BIC improvement "
                                  "an edge must bring."),
+    swaps: bool = typer.Option(_D.selection.swaps, "--swaps/--no-swaps",
+                               help="--selection model, whole building: after the backward "
+                               "pass, replace a kept air path by one that shares a zone with "
+                               "it (any measured pair) when that improves BIC by more than "
+                               "--margin, then prune again."),
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
@@ -232,7 +237,8 @@ def identify(
                                    allow_parallel=allow_parallel, scope=scope),
         selection=SelectionOptions(method=selection, candidates=candidates,
                                    criterion=selection_criterion, margin=margin,
-                                   min_t=min_t, predict_t=predict_t, stability=stability,
+                                   min_t=min_t, predict_t=predict_t, swaps=swaps,
+                                   stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
