@@ -63,6 +63,8 @@ def test_a_swap_replaces_a_substitute_by_the_edge_the_candidates_lacked():
     assert "removing it costs bic +200.0" in res.reasons[T.name]
     # the swapped-in edge is a candidate of the result (its reason is reported)
     assert T.name in {c.name for c in res.candidates}
+    assert set(res.reasons) == {c.name for c in res.candidates}
+    assert res.reasons[V.name].startswith("out: tried in place of a kept edge sharing a zone")
 
 
 def test_no_swap_below_the_margin_and_none_to_an_edge_that_shares_no_zone():

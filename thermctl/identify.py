@@ -123,7 +123,9 @@ class SelectionOptions:
         when that improves the criterion by more than ``margin``, then prune again
         (:func:`thermctl.structure.search.search_edges`). Backward elimination from SIN's
         picks keeps a substitute when the true partner of one of its zones was not
-        proposed (docs/identification.md, "Swaps").
+        proposed: on the Pugh Hall factor study (36 cases) swaps took recall from 0.91 to
+        0.95 and the false paths from 0.42 to 0.19 per building (docs/identification.md,
+        "Swaps"). Default on; local problems do not use it.
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the
@@ -146,7 +148,7 @@ class SelectionOptions:
     margin: float = 10.0
     min_t: float = 0.0
     predict_t: float | None = None
-    swaps: bool = False
+    swaps: bool = True
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0

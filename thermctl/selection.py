@@ -215,7 +215,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                       | ({"rbar_v": float(np.exp(np.mean(np.log(list(per_edge.values())))))}
                          if per_edge else {}))
         scorer.n_fits += 1
-    return SelectionResult([x.pair + (x.d,) for x in cur], cands, res.path, res.reasons,
+    return SelectionResult([x.pair + (x.d,) for x in cur], res.candidates, res.path, res.reasons,
                            criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits)
 
 

@@ -30,6 +30,8 @@ too, and a model criterion can tell a wall's conduction from mixing only by fitt
 
 from __future__ import annotations
 
+import math
+
 import time
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -381,6 +383,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             f_base, v_base = done[key]
             for name, dv in scorer.screen(base, alts, f_base).items():
                 proposals.append((v_base + dv - val, e, name))
+                swap_screen[name] = min(swap_screen.get(name, math.inf), v_base + dv - val)
         # the screening holds every other parameter: refit the two most promising, side by
         # side (on the twin house a round of three, one after the other, took ~25 s)
         proposals = sorted((p for p in proposals if p[0] < 0), key=lambda p: p[0])[:2]
@@ -422,18 +425,24 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         say(f"swapped {e.name} for {c.name} ({crit} {d:+.1f})")
         return True
 
+    swap_screen = {}        # swap alternative -> best screened change of the criterion
     if direction in ("backward", "both"):
         backward()
         if swaps:
             swap_by_name = {c.name: c for c in swaps}
-            for c in swaps:
-                if c.name not in by_name:
-                    cands.append(c)
-                    by_name[c.name] = c
             for _ in range(max_swaps):
                 if not swap():
                     break
                 backward()
+            # the alternatives a swap tried join the candidates (with why they are out)
+            for name in sorted(swap_screen):
+                if name not in by_name:
+                    cands.append(swap_by_name[name])
+                    by_name[name] = swap_by_name[name]
+                    if name not in reasons:
+                        reasons[name] = (f"out: tried in place of a kept edge sharing a zone, "
+                                         f"best screening {crit} change "
+                                         f"{swap_screen[name]:+.1f}")
     for c in cands:
         if c.name not in reasons:
             if c in cur:
