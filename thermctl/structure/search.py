@@ -31,7 +31,6 @@ too, and a model criterion can tell a wall's conduction from mixing only by fitt
 from __future__ import annotations
 
 import math
-
 import time
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -229,8 +228,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     swap_t : float
         A swap must also improve the likelihood day after day: the t statistic of the daily
         differences (``scorer.consistent`` of the two structures, Vuong's test for models
-        that are not nested) must reach this [-]; scorers without ``consistent`` are not
-        asked.
+        that are not nested) must reach this [-], and whatever the scorer's own test asks
+        (``min_t``, ``predict_t``); scorers without ``consistent`` are not asked.
 
     Returns
     -------
@@ -407,8 +406,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 # two structures of the same size, neither nested in the other: the swap
                 # must also win day after day (Vuong's test: the t statistic of the daily
                 # likelihood differences, the same statistic as an added edge's)
-                _, t, why = holds(fitted, f_new)
-                if not t < swap_t:
+                ok, t, why = holds(fitted, f_new)
+                if ok and not t < swap_t:
                     best = (v_new, f_new, e, c, why)
         if best is None:
             say("swap: no replacement of a kept edge improves the criterion by the margin")
