@@ -307,23 +307,28 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                                                f"than the margin {margin:g}"))
                 say(f"stop: best candidate {pick} gives {crit} {d:+.1f}")
                 break
+    def fit_missing(structures):
+        """Fit every structure not fitted yet, warm from the current fit; the fits are
+        independent, so a scorer that can runs them side by side."""
+        todo = {}
+        for st in structures:
+            key = frozenset(x.name for x in st)
+            if key not in done and key not in todo:
+                todo[key] = st
+        if not todo:
+            return
+        if workers > 1 and hasattr(scorer, "fit_many"):
+            fits = scorer.fit_many(list(todo.values()), warm=fitted, workers=workers)
+        else:
+            fits = [scorer.fit(st, warm=fitted) for st in todo.values()]
+        done.update(zip(todo, fits))
+
     def backward():
         nonlocal cur, fitted, val
         while cur:
             trials = {}
             rests = {c.name: [x for x in cur if x != c] for c in cur}
-            todo = {}
-            for name, rest in rests.items():
-                key = frozenset(x.name for x in rest)
-                if key not in done and key not in todo:
-                    todo[key] = rest
-            if todo:
-                # the trials are independent: a scorer that can fits them side by side
-                if workers > 1 and hasattr(scorer, "fit_many"):
-                    fits = scorer.fit_many(list(todo.values()), warm=fitted, workers=workers)
-                else:
-                    fits = [scorer.fit(rest, warm=fitted) for rest in todo.values()]
-                done.update(zip(todo, fits))
+            fit_missing(rests.values())
             for name, rest in rests.items():
                 f2, v2 = done[frozenset(x.name for x in rest)]
                 trials[name] = (v2 - val, f2, v2)
@@ -386,18 +391,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         # the screening holds every other parameter: refit the two most promising, side by
         # side (on the twin house a round of three, one after the other, took ~25 s)
         proposals = sorted((p for p in proposals if p[0] < 0), key=lambda p: p[0])[:2]
-        trial = {}
-        for _, e, name in proposals:
-            new = [x for x in cur if x != e] + [swap_by_name[name]]
-            key = frozenset(x.name for x in new)
-            if key not in done:
-                trial[key] = new
-        if trial:
-            if workers > 1 and hasattr(scorer, "fit_many"):
-                fits = scorer.fit_many(list(trial.values()), warm=fitted, workers=workers)
-            else:
-                fits = [scorer.fit(new, warm=fitted) for new in trial.values()]
-            done.update(zip(trial, fits))
+        fit_missing([x for x in cur if x != e] + [swap_by_name[name]]
+                    for _, e, name in proposals)
         best = None
         for _, e, name in proposals:
             c = swap_by_name[name]
