@@ -164,6 +164,9 @@ class SelectionOptions:
                 and not isinstance(self.predict_t, bool) and math.isfinite(self.predict_t)):
             raise DataError(f"identify option selection.predict_t must be a number or None, "
                             f"found {self.predict_t}")
+        if not isinstance(self.swaps, (bool, np.bool_)):
+            raise DataError(f"identify option selection.swaps must be True or False, found "
+                            f"{self.swaps!r}")
         if not (isinstance(self.stability, (int, np.integer)) and self.stability >= 0):
             raise DataError(f"identify option selection.stability must be an integer >= 0 "
                             f"(resamples), found {self.stability!r}")
