@@ -30,7 +30,8 @@ Every row is appended as JSON to ``benchmarks/results/family-runs.jsonl`` when i
 (``--save``), so an interrupted study keeps what it finished; ``--table`` rebuilds the
 tables from that file, with the last run of every case (a re-run replaces what it
 re-measured; runs with an option, " [t]", " [fast]", " [all:holdout]" or " [predict 2]", in
-a table of their own).
+a table of their own). Since session 15 the defaults include swaps: rows run with the
+then-option ``--swaps`` alone count as default runs; ``--no-swaps`` runs without them.
 
 Usage::
 
@@ -159,6 +160,15 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
+def _as_default(row):
+    """A row run with ``--swaps`` alone (session 15, before swaps became the default) is a
+    run of today's default: its case name loses " [swaps]", so that it replaces the older
+    run of the same case in the defaults table."""
+    if row.get("selection") == {"swaps": True} and not row.get("estimation"):
+        row = dict(row, case=row["case"].replace(" [swaps]", ""))
+    return row
+
+
 def latest(rows):
     """The last run of every (study, case, seed, days): a re-run replaces what it
     re-measured."""
@@ -226,17 +236,21 @@ def main(argv=None):
                          "(case names get ' [all:holdout]')")
     ap.add_argument("--predict-t", type=float, default=None, metavar="T",
                     help="identify's --predict-t (case names get ' [predict T]')")
-    ap.add_argument("--swaps", action="store_true",
-                    help="identify's --swaps (case names get ' [swaps]')")
+    ap.add_argument("--no-swaps", action="store_true",
+                    help="identify's --no-swaps (case names get ' [no swaps]'; the rows named "
+                         "' [swaps]' were run when swaps were an option: --table shows them "
+                         "as the default)")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
-        rows = latest(json.loads(line) for line in RUNS.read_text().splitlines()
+        rows = latest(_as_default(json.loads(line)) for line in RUNS.read_text().splitlines()
                       if line.strip())
         # the defaults, then the runs with an option (case names with " [...]")
         plain = [r for r in rows if " [" not in r["case"]]
         opts = [r for r in rows if " [" in r["case"]]
-        out = []
+        out = ["The defaults include swaps since session 15 (rows run with the then-option "
+               "--swaps count as default runs); the earlier default runs stay in "
+               "family-runs.jsonl.", ""]
         for study in ("factors", "family"):
             out += [f"## {study}", "", table(plain, study), ""]
             if any(r["study"] == study for r in opts):
@@ -273,9 +287,9 @@ def main(argv=None):
         if args.predict_t is not None:
             sel["predict_t"] = args.predict_t
             name += f" [predict {args.predict_t:g}]"
-        if args.swaps:
-            sel["swaps"] = True
-            name += " [swaps]"
+        if args.no_swaps:
+            sel["swaps"] = False
+            name += " [no swaps]"
         row = run_case(study, name, kw, seed, days, estimation=est, selection=sel)
         rows.append(row)
         print(json.dumps(row), flush=True)
