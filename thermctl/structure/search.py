@@ -376,26 +376,26 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         nonlocal cur, fitted, val
         names = {x.name for x in cur}
         # the bases: the backward pass's removal trials, already fitted after its keep step
-        fit_missing([x for x in cur if x != e] for e in cur)
+        without = {e.name: [x for x in cur if x != e] for e in cur}
+        fit_missing(without.values())
         proposals = []
         for e in cur:
             alts = [c for c in swaps if c.name not in names and set(c.pair) & set(e.pair)]
             if not alts:
                 continue
-            base = [x for x in cur if x != e]
-            f_base, v_base = done[frozenset(x.name for x in base)]
+            base = without[e.name]
+            f_base, v_base = done[frozenset(names - {e.name})]
             for name, dv in scorer.screen(base, alts, f_base).items():
                 proposals.append((v_base + dv - val, e, name))
                 swap_screen[name] = min(swap_screen.get(name, math.inf), v_base + dv - val)
         # the screening holds every other parameter: refit the two most promising, side by
         # side (twin house: three one after the other 188 s in all, two side by side 174 s)
         proposals = sorted((p for p in proposals if p[0] < 0), key=lambda p: p[0])[:2]
-        fit_missing([x for x in cur if x != e] + [swap_by_name[name]]
-                    for _, e, name in proposals)
+        fit_missing(without[e.name] + [swap_by_name[name]] for _, e, name in proposals)
         best = None
         for _, e, name in proposals:
             c = swap_by_name[name]
-            f_new, v_new = done[frozenset(x.name for x in cur if x != e) | {c.name}]
+            f_new, v_new = done[frozenset(names - {e.name} | {name})]
             if v_new - val < -margin and (best is None or v_new < best[0]):
                 # two structures of the same size, neither nested in the other: the swap
                 # must also win day after day (Vuong's test: the t statistic of the daily
@@ -408,7 +408,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             return False
         v_new, f_new, e, c, why = best
         d = v_new - val
-        cur = [x for x in cur if x != e] + [c]
+        cur = without[e.name] + [c]
         fitted, val = f_new, v_new
         path.append(SelectionStep("swap", c.name, val, d, [x.name for x in cur],
                                   note=f"replaces {e.name}"))
