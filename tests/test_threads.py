@@ -124,3 +124,23 @@ def test_a_fit_started_ahead_stops_when_cancelled(floor):
     serial = select_air_paths(spec, meas, **kw)
     assert got.edges == serial.edges and got.n_fits == serial.n_fits
     assert got.path[0].value == pytest.approx(serial.path[0].value, rel=1e-12)
+
+
+def test_swap_stage_in_threads_equals_serial(floor):
+    """The swap stage screens each kept edge's replacements in its own problem; with two
+    workers those screenings (and the refits) run side by side: the same screening values,
+    path and fit as one after the other."""
+    spec, meas = floor
+    cands = [("r240", "r243"), ("r241", "r244"), ("r242", "r244")]
+    swaps = [("r241", "r247"), ("r240", "r241"), ("r243", "r244")]
+    out = [select_air_paths(spec, meas, candidates=cands, direction="backward", workers=w,
+                            max_iter=60, swaps=swaps) for w in (1, 2)]
+    s1, s2 = out
+    assert s1.edges == s2.edges
+    assert [(st.action, st.edge) for st in s1.path] == [(st.action, st.edge) for st in s2.path]
+    np.testing.assert_allclose([st.value for st in s1.path], [st.value for st in s2.path],
+                               rtol=1e-12)
+    # the alternatives the screening tried, with their values, are in both
+    tried = {k: v for k, v in s1.reasons.items() if "tried in place" in v}
+    assert tried and tried == {k: s2.reasons[k] for k in tried}
+    assert s1.n_fits == s2.n_fits

@@ -191,6 +191,12 @@ class LikelihoodScorer:
         with ignore_warnings(BoundWarning, ConvergenceWarning):
             return thread_map(lambda s: self.fit(s, warm=warm), structures, workers)
 
+    def screen_many(self, jobs, workers: int = 1) -> list:
+        """:meth:`screen` of every ``(edges, rest, fitted)`` in ``jobs``, ``workers`` at a
+        time (threads, as :meth:`fit_many`); the results are the serial loop's."""
+        with ignore_warnings(BoundWarning, ConvergenceWarning):
+            return thread_map(lambda j: self.screen(*j), jobs, workers)
+
     def screen(self, edges, rest, fitted) -> dict:
         """Edge name → criterion change of adding each of ``rest``, everything else held."""
         if self.screen_mode == "grid":
@@ -376,7 +382,8 @@ class LikelihoodScorer:
                     e[i] = math.log(rb0 * f)
                     best = min(best, pb.nll(e))
                 out[c.name] = 2.0 * (best - f0) + pen
-        self.n_fits += 1
+        with self._count:
+            self.n_fits += 1
         return out
 
     def penalty(self, est):
