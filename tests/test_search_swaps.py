@@ -112,6 +112,40 @@ def test_a_swap_must_also_win_day_after_day(t, swapped):
         assert f"daily gain t {t:.1f}" in res.reasons[T.name]
 
 
+class HeldScreen(DailyScorer):
+    """A screening that holds the other parameters: ``screen_bias`` [criterion] is added to
+    each alternative's screened change (the refit is the table's)."""
+
+    def __init__(self, single, t_by_edge, joint, screen_bias):
+        super().__init__(single, t_by_edge)
+        self.joint, self.screen_bias = joint, screen_bias
+
+    def screen(self, edges, rest, fitted):
+        out = super().screen(edges, rest, fitted)
+        return {k: v + self.screen_bias.get(k, 0.0) for k, v in out.items()}
+
+
+def test_the_refits_go_to_two_different_alternatives_whatever_their_screening_sign():
+    # kept: S (a-b) and W (a-e). X (a-f) screens best in place of both (-30 and -20) but
+    # fails the daily test; T (a-c), the truth, screens +5 (the held screening misses 55 of
+    # its gain) and refits to -50 with t 3. The two refit slots go to X once and to T, not to
+    # X twice, and a positive screening does not keep T out
+    W, X = cand("a", "e"), cand("a", "f")
+    single = {S.name: 100.0, W.name: 100.0, T.name: 150.0, X.name: 130.0}
+    joint = {frozenset((S.name, W.name)): 200.0, frozenset((T.name, W.name)): 250.0,
+             frozenset((X.name, W.name)): 230.0, frozenset((S.name, X.name)): 220.0}
+    sc = HeldScreen(single, {X.name: 0.8, T.name: 3.0}, joint,
+                    {T.name: 55.0, X.name: 0.0})
+    res = search_edges([S, W], sc, direction="backward", margin=10.0, swaps=[S, W, T, X])
+    assert sorted(c.name for c in res.edges) == sorted([T.name, W.name])
+    swapped = [st for st in res.path if st.action == "swap"]
+    assert [st.edge for st in swapped] == [T.name]
+    assert swapped[0].delta == pytest.approx(-50.0)
+    # the first round's refits (after the start and the two removal trials): X in S's place,
+    # where it screened best, and T; not X a second time in W's place
+    assert sc.fits[3:5] == [frozenset((W.name, X.name)), frozenset((W.name, T.name))]
+
+
 def test_swaps_recover_the_true_path_a_substitute_held_on_the_testbed():
     """Pugh Hall, control at the data step, 14 days, seed 1: the default search keeps
     r243–r247 in place of the true r241–r247 (the true structure's BIC is 171 better than
