@@ -217,8 +217,10 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         ``fit_many(structures, warm=, workers=)`` (threads; the result is the serial one).
     swaps : list of Candidate, optional
         After the backward pass, try replacing each kept edge by one of these that shares a
-        zone with it (same number of edges); a replacement that improves the criterion by
-        more than ``margin`` is made and the backward pass runs again. Greedy elimination
+        zone with it (same number of edges). Each round screens them all (each kept edge's
+        in one problem, ``scorer.screen_many`` side by side when ``workers > 1``) and refits
+        the two best-screened different pairs; one that improves the criterion by more than
+        ``margin`` is made and the backward pass runs again. Greedy elimination
         keeps a substitute whose true neighbour was never a candidate or went first: on
         four of five Pugh Hall factor cases where the default kept one, the true structure
         had a criterion 91–181 better than the one found (docs/identification.md, "Swaps").
