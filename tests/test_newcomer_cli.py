@@ -153,6 +153,32 @@ def test_identify_progress_lines_without_a_terminal(tb, tmp_path):
                for ln in lines), lines
 
 
+def test_identify_shows_the_intervals_as_a_stage_and_the_final_fit_as_a_fit():
+    """After the search, the final fit ticks the fit count and the intervals are their own
+    stage (they took 12-17 s of the twin house's run, shown as selection before)."""
+    import warnings
+
+    from thermctl.data import read_measurements
+    from thermctl.identify import IdentifyOptions, SelectionOptions, identify
+    from thermctl.testbed import generate as generate_testbed
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pugh = generate_testbed(days=8, seed=3)         # Pugh Hall: 3 true air paths
+        meas = read_measurements(pugh.data, pugh.spec)
+    seen = []
+    opt = IdentifyOptions(selection=SelectionOptions(swaps=False))
+    ident = identify(meas, opt, progress=lambda stage, n, total: seen.append((stage, n, total)))
+    assert ident.model.network.convection_edges, "the test needs a model with air paths"
+    stages = [s for s, _, _ in seen]
+    assert ("intervals", 0, 1) in seen and ("intervals", 1, 1) in seen
+    fits = [n for s, n, _ in seen if s.startswith("selection fits")]
+    # the last count shown is the selection's own, the final fit included (fits in two threads
+    # may report out of order; the final fit comes after them); then the intervals
+    assert fits[-1] == max(fits) == ident.selection.n_fits
+    assert stages.index("intervals") > max(i for i, s in enumerate(stages)
+                                           if s.startswith("selection fits"))
+
+
 def test_progress_reporter_eta_heartbeat_and_log(caplog, capsys):
     import time
 

@@ -604,7 +604,7 @@ def _identify_paper(meas, cal, val, opt, progress) -> Identification:
     if not net.convection_edges:
         notes.append("no convection edge selected: the model is conduction-only")
     elif not opt.paper:
-        gb, ida = _greybox_fit(net, cal, opt, notes)
+        gb, ida = _greybox_fit(net, cal, opt, notes, progress=progress)
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     elif opt.estimation.estimator != "none":
         est, grid = _estimate(net, cal, opt, progress, notes)
@@ -730,7 +730,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             notes.append("the data support no convection edge: the model is conduction-only")
         else:
             gb = sel.estimator
-            ida = _intervals(gb, opt, notes, cal)
+            ida = _intervals(gb, opt, notes, cal, progress)
             _shared_rbar_check(ida, sel.per_edge, notes)
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
@@ -1289,7 +1289,7 @@ def _resolve_fast_gain(spec, edges, cal, opt, notes, progress=None, off=None):
     return dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=use))
 
 
-def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
+def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False, progress=None):
     """Grey-box fit of a given structure (``selection="scores"`` with a grey-box criterion,
     or the whole-building refit of local results with ``per_edge``)."""
     from .estimate.likelihood import LikelihoodEstimator
@@ -1298,12 +1298,24 @@ def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False):
         gb = LikelihoodEstimator(net, criterion=opt.estimation.criterion,
                                  solar=opt.estimation.solar, per_edge=per_edge,
                                  **_mass_options(opt)).fit(cal, init=init)
-    return gb, _intervals(gb, opt, notes, cal)
+    return gb, _intervals(gb, opt, notes, cal, progress)
 
 
-def _intervals(gb, opt, notes, cal=None):
+def _intervals(gb, opt, notes, cal=None, progress=None):
     if opt.estimation.intervals == "none" or gb.criterion != "likelihood":
         return None
+    if progress:
+        # a stage of its own: on the twin house 12-17 s after the last selection fit, which
+        # the progress lines showed as more selection
+        progress("intervals", 0, 1)
+    try:
+        return _intervals_of(gb, opt, notes, cal)
+    finally:
+        if progress:
+            progress("intervals", 1, 1)
+
+
+def _intervals_of(gb, opt, notes, cal):
     from .estimate.likelihood import identifiability
     names = [n for n in gb.problem_.layout.names if n.startswith("rbar_v")] + ["tau0"]
     method = opt.estimation.intervals
