@@ -249,8 +249,8 @@ def main(argv=None):
         plain = [r for r in rows if " [" not in r["case"]]
         opts = [r for r in rows if " [" in r["case"]]
         out = ["The defaults include swaps since session 15 (rows run with the then-option "
-               "--swaps count as default runs); the earlier default runs stay in "
-               "family-runs.jsonl.", ""]
+               "--swaps count as default runs; since session 16 a swap round refits two "
+               "different pairs); the earlier default runs stay in family-runs.jsonl.", ""]
         for study in ("factors", "family"):
             out += [f"## {study}", "", table(plain, study), ""]
             if any(r["study"] == study for r in opts):
