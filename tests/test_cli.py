@@ -214,7 +214,13 @@ def test_misfit_note_only_when_innovations_are_far_from_white():
     bad = SimpleNamespace(intervals={"rbar_v": SimpleNamespace(inflation=246.0)})
     _misfit_note(bad, IdentifyOptions(), notes)
     assert len(notes) == 1 and "variance ratio 246" in notes[0] and "--selection-criterion holdout" in notes[0]
-    assert "--candidates all" in notes[0]
+    assert "--candidates all" in notes[0] and "--predict-t 2" in notes[0]
+    # the prediction test asked already: the note does not suggest it again
+    tested = IdentifyOptions()
+    tested.selection.predict_t = 2.0
+    _misfit_note(bad, tested, notes)
+    assert "--predict-t" not in notes[-1] and "--selection-criterion holdout" in notes[-1]
+    notes.pop()
     # chosen on held-back days already: the note does not send the user there again
     held = IdentifyOptions()
     held.selection.criterion = "holdout"
