@@ -214,9 +214,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                                   if not ConvectionParameters.is_rbar(k, per_edge=True)}
                       | ({"rbar_v": float(np.exp(np.mean(np.log(list(per_edge.values())))))}
                          if per_edge else {}))
-        scorer.n_fits += 1
-        if on_fit is not None:
-            on_fit(scorer.n_fits)           # shown like the search's fits
+        scorer.count_fit()                  # counted and shown like the search's fits
     return SelectionResult([x.pair + (x.d,) for x in cur], res.candidates, res.path, res.reasons,
                            criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits)
 

@@ -124,7 +124,7 @@ class LikelihoodScorer:
         mean of its R̄_v)."""
         ahead = self._ahead.pop(frozenset(c.name for c in edges), None) if warm is None else None
         if ahead is not None:
-            return self._count_fit(ahead.result())
+            return self.count_fit(ahead.result())
         init = None
         if warm is not None:
             keep = {_key(c) for c in edges}
@@ -341,10 +341,11 @@ class LikelihoodScorer:
         with ignore_warnings(BoundWarning, ConvergenceWarning):
             est.fit(self.train, init=init)
         out = est, self.value(est)
-        return self._count_fit(out) if count else out
+        return self.count_fit(out) if count else out
 
-    def _count_fit(self, out):
-        """Count one full fit (and tell ``on_fit``); returns ``out``."""
+    def count_fit(self, out=None):
+        """Count one full fit (and tell ``on_fit``); returns ``out``. Also for a fit made
+        outside the scorer on its behalf (the selection's final fit)."""
         with self._count:
             self.n_fits += 1
             n = self.n_fits
