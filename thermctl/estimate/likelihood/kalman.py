@@ -131,19 +131,31 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
     Qd : shape (n, n)
         :math:`\int_0^{dt} e^{As}\Sigma e^{A^T s} ds` (symmetrised).
     """
-    n, m = A.shape[0], B.shape[1]
+    n = A.shape[0]
     h = dt / 2.0 ** squarings
-    # [[A, B], [0, 0]] h  ->  [[Phi, Gamma], [0, I]]
-    top = ca.horzcat(A * h, B * h)
-    E1 = expm_taylor(ca.vertcat(top, ca.MX(m, n + m) if isinstance(A, ca.MX) else ca.DM(m, n + m)),
-                     order)
-    Phi, Gam = E1[:n, :n], E1[:n, n:]
-    # Van Loan: expm([[-A, Sigma], [0, A^T]] h) = [[*, F12], [0, F22]], Q = F22^T F12
-    Z = ca.MX(n, n) if isinstance(A, ca.MX) else ca.DM(n, n)
-    VL = ca.vertcat(ca.horzcat(-A * h, Sigma * h), ca.horzcat(Z, A.T * h))
-    E2 = expm_taylor(VL, order)
     mt = dense_mtimes if isinstance(A, ca.MX) else ca.mtimes
-    Q = mt(E2[n:, n:].T, E2[:n, n:])
+    # Σ is diagonal in every model of this package: its products are row scalings (n²),
+    # which CasADi's sparse product does; a dense Σ goes through BLAS like the rest
+    mts = ca.mtimes if Sigma.nnz() <= n else mt
+    P, G, S = A * h, B * h, Sigma * h
+    I = _eye(n)
+    # The Taylor polynomial (Horner, as expm_taylor) of two block matrices, by blocks:
+    #   [[P, G], [0, 0]]     -> [[Phi, Gamma], [0, I]]
+    #   [[-P, S], [0, P^T]]  -> [[*, F12], [0, F22]]   (Van Loan: Q = F22^T F12)
+    # F22 is Phi^T at every Horner stage (a polynomial in P commutes with P), the top-left
+    # block of Van Loan's is not needed and the bottom-right of the first stays I. So a stage
+    # costs two n×n products and one n×m, where the whole blocks cost an (n+m)-square and a
+    # 2n-square product (8 n³): on the twin house N2 (123 states) the default identify took
+    # 175 s instead of 187 s (279 instead of 303 CPU s), the same selection path.
+    E = I + P / order
+    Gm = G / order
+    F12 = S / order
+    for k in range(order - 1, 0, -1):
+        F12 = (mts(S, E.T) - mt(P, F12)) / k
+        Gm = (G + mt(P, Gm)) / k
+        E = I + mt(P, E) / k
+    Phi, Gam = E, Gm
+    Q = mt(Phi, F12)
     Q = 0.5 * (Q + Q.T)
     for _ in range(squarings):
         Q = mt(mt(Phi, Q), Phi.T) + Q
