@@ -134,6 +134,25 @@ def test_discretize_matches_expm_and_modal_noise(net5):
     assert np.max(np.abs(m["Qd"] - Q)) < 1e-9 * np.max(np.abs(Q))
 
 
+def test_discretize_with_a_dense_noise_intensity_matches_van_loan():
+    # the block-wise Taylor stages of discretize (Sigma dense here, diagonal in the models)
+    # against scipy's expm of the whole Van Loan block, on a non-stiff system
+    rng = np.random.default_rng(3)
+    n, m, dt = 5, 2, 60.0
+    M = rng.normal(size=(n, n))
+    A = -(M @ M.T) / n * 1e-2 - 1e-3 * np.eye(n)
+    B = rng.normal(size=(n, m)) * 1e-2
+    L = rng.normal(size=(n, n)) * 1e-3
+    Sig = L @ L.T
+    Phi, Gam, Q = kalman.discretize(ca.DM(A), ca.DM(B), ca.DM(Sig), dt, squarings=4)
+    E = sla.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * dt)
+    V = sla.expm(np.block([[-A, Sig], [np.zeros((n, n)), A.T]]) * dt)
+    Q_ref = V[n:, n:].T @ V[:n, n:]
+    assert np.allclose(np.asarray(Phi), E[:n, :n], rtol=0, atol=1e-13)
+    assert np.allclose(np.asarray(Gam), E[:n, n:], rtol=1e-12, atol=0)
+    assert np.allclose(np.asarray(Q), 0.5 * (Q_ref + Q_ref.T), rtol=1e-11, atol=0)
+
+
 def test_dare_doubling_and_numpy_match_scipy(net5):
     pb, m = _stiff_system(net5)
     ref = sla.solve_discrete_are(m["Phi"].T, pb.C.T, m["Qd"], m["R"])
