@@ -166,3 +166,25 @@ def test_swaps_recover_the_true_path_a_substitute_held_on_the_testbed():
             found[swaps] = {tuple(sorted((e.a, e.b))) for e in ident.model.network.convection_edges}
     assert found[False] != true and ("r243", "r247") in found[False]
     assert found[True] == true
+
+
+def test_a_second_search_from_the_kept_edges_reuses_the_trials_of_the_first():
+    # the misfit check of `thermctl identify`: a backward pass with a stricter test starts
+    # from what the first search kept; the kept structure and its removal trials are taken
+    # from the first search's `trials`, not fitted again
+    sc = TableScorer({S.name: 50.0, U.name: 40.0, T.name: 0.0})
+    first = search_edges([S, U, T], sc, direction="backward", margin=10.0)
+    assert {c.name for c in first.edges} == {S.name, U.name}
+    kept = frozenset((S.name, U.name))
+    assert set(first.trials) == {kept, frozenset((S.name,)), frozenset((U.name,))}
+    again = TableScorer(sc.single)
+    second = search_edges(first.edges, again, direction="backward", margin=10.0,
+                          known=first.trials)
+    assert {c.name for c in second.edges} == {S.name, U.name}
+    assert again.fits == []                       # every structure it needed was known
+    # a stricter margin removes U (gain 40) and needs only the structures below {S}
+    strict = TableScorer(sc.single)
+    third = search_edges(first.edges, strict, direction="backward", margin=45.0,
+                         known=first.trials)
+    assert [c.name for c in third.edges] == [S.name]
+    assert strict.fits == [frozenset()]

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -45,6 +45,10 @@ class SelectionResult:
     time : float
         [s]
     n_fits : int
+    trials : dict
+        The search's fit of the selected structure and its last removal trials
+        (:attr:`~thermctl.structure.search.SearchResult.trials`), for a search that starts
+        from these edges (``select_air_paths(known=...)``).
     """
 
     edges: list
@@ -56,6 +60,7 @@ class SelectionResult:
     per_edge: dict
     time: float
     n_fits: int
+    trials: dict = field(default_factory=dict, repr=False)
 
     def summary(self) -> str:
         lines = [f"model-based edge selection ({self.criterion}): {len(self.edges)} edge(s) "
@@ -100,7 +105,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
-                     ahead=None, swaps=None, **estimator_kwargs) -> SelectionResult:
+                     ahead=None, swaps=None, known=None, **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -164,6 +169,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         After the backward pass, replacements of each kept edge by one of these that shares
         a zone with it (:func:`~thermctl.structure.search.search_edges`); ``all``: every
         pair of measured zones with a length. None: no swaps.
+    known : dict, optional
+        Structures fitted already with the same data and model options (another
+        selection's :attr:`SelectionResult.trials`); taken instead of fitted again.
     ahead : LikelihoodScorer, optional
         Fits started ahead (:meth:`LikelihoodScorer.speculate`) with the same options and
         data: the search takes their results instead of fitting again
@@ -192,7 +200,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         swaps = candidate_pairs(spec, include_unmeasured=False)
     swaps = None if swaps is None else [by_name.get(c.name, c) for c in as_candidates(spec, swaps)]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
-                       margin=margin, progress=progress, workers=workers, swaps=swaps)
+                       margin=margin, progress=progress, workers=workers, swaps=swaps,
+                       known=known)
     est, cur = res.fitted, res.edges
     per_edge = {}
     if cur:
@@ -216,7 +225,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                          if per_edge else {}))
         scorer.count_fit()                  # counted and shown like the search's fits
     return SelectionResult([x.pair + (x.d,) for x in cur], res.candidates, res.path, res.reasons,
-                           criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits)
+                           criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits,
+                           res.trials)
 
 
 def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: float = 10.0,

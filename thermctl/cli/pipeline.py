@@ -134,6 +134,12 @@ def identify(
                                            "6-h-ahead prediction error it must reach as well "
                                            "(default: not tested; -2: a veto on edges that "
                                            "predict worse day after day)."),
+    misfit_ratio: float = typer.Option(_D.selection.misfit_ratio, "--misfit-ratio", min=0.0,
+                                       help="--selection model, whole building: when the "
+                                       "selected model's R̄_v variance ratio (sandwich/Hessian) "
+                                       "is above this and --predict-t is not set, every kept air "
+                                       "path must also pass --predict-t 2 (a backward pass from "
+                                       "the selected edges). 0: off."),
     stability: int = typer.Option(_D.selection.stability, "--stability", min=0,
                                   help="--selection model: stability selection with this many "
                                   "resamples of half the calibration days (blocks of 2 days); "
@@ -237,8 +243,8 @@ def identify(
                                    allow_parallel=allow_parallel, scope=scope),
         selection=SelectionOptions(method=selection, candidates=candidates,
                                    criterion=selection_criterion, margin=margin,
-                                   min_t=min_t, predict_t=predict_t, swaps=swaps,
-                                   stability=stability,
+                                   min_t=min_t, predict_t=predict_t,
+                                   misfit_ratio=misfit_ratio, swaps=swaps, stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,

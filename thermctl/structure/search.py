@@ -81,10 +81,12 @@ class SelectionStep:
 
     Attributes
     ----------
-    action : {"start", "add", "reject", "remove", "stop", "keep", "swap"}
+    action : {"start", "add", "reject", "remove", "stop", "keep", "swap", "check"}
         ``reject``: the best forward candidate's criterion gain cleared the margin but did
         not hold day after day (``scorer.consistent``); a ``stop`` follows. ``swap``:
         ``edge`` replaced a kept edge that shares a zone with it (named in ``note``).
+        ``check``: a second search with a stricter test starts from the edges so far
+        (``thermctl identify``'s misfit check).
         ``keep``: the backward pass ended; ``screened`` holds the criterion change of
         removing each kept edge.
     edge : str or None
@@ -124,6 +126,10 @@ class SearchResult:
         The scorer's fit of the selected structure.
     value : float
         Its criterion (lower is better).
+    trials : dict
+        The selected structure's fit and its last removal trials: structure (frozenset of
+        edge names) → ``(fit, criterion)``, for a later search from these edges
+        (``search_edges(known=...)``).
     """
 
     edges: list
@@ -132,6 +138,7 @@ class SearchResult:
     reasons: dict
     fitted: object
     value: float
+    trials: dict = field(default_factory=dict, repr=False)
 
 
 class Scorer(Protocol):
@@ -195,7 +202,7 @@ def candidate_pairs(spec, zones=None, include_unmeasured: bool = True,
 def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(),
                  max_edges: int | None = None, margin: float = 10.0,
                  progress=None, workers: int = 1, swaps=None,
-                 max_swaps: int = 10, swap_t: float = 2.0) -> SearchResult:
+                 max_swaps: int = 10, swap_t: float = 2.0, known=None) -> SearchResult:
     """Forward selection and/or backward elimination of air paths by ``scorer``.
 
     Parameters
@@ -232,6 +239,10 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         differences (``scorer.consistent`` of the two structures, Vuong's test for models
         that are not nested) must reach this [-], and whatever the scorer's own test asks
         (``min_t``, ``predict_t``); scorers without ``consistent`` are not asked.
+    known : dict, optional
+        Structures fitted already by a scorer of the same data and model options (another
+        search's :attr:`SearchResult.trials`): frozenset of edge names → ``(fit,
+        criterion)``. They are taken instead of fitted again.
 
     Returns
     -------
@@ -243,11 +254,14 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     by_name = {c.name: c for c in cands}
     crit = scorer.name
     cur = list(cands) if direction == "backward" else list(start)
-    fitted, val = scorer.fit(cur)
     # every structure fitted so far: a backward trial that removes the edge added last is
     # the structure before it, already fitted (one full fit of the ~4 of a local problem
     # that keeps one path)
-    done = {frozenset(c.name for c in cur): (fitted, val)}
+    done = dict(known or {})
+    key0 = frozenset(c.name for c in cur)
+    if key0 not in done:
+        done[key0] = scorer.fit(cur)
+    fitted, val = done[key0]
     path = [SelectionStep("start", None, val, 0.0, [c.name for c in cur],
                           note=f"{len(cur)} edge(s)")]
     reasons, best_screen = {}, {}
@@ -468,7 +482,10 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             reasons[c.name] += " [parallel to a wall]"
         if c.unmeasured:
             reasons[c.name] += " [unmeasured end]"
-    return SearchResult(cur, cands, path, reasons, fitted, val)
+    names = frozenset(x.name for x in cur)
+    trials = {k: v for k, v in done.items() if k == names or (len(k) == len(names) - 1
+                                                               and k < names)}
+    return SearchResult(cur, cands, path, reasons, fitted, val, trials)
 
 
 def as_candidates(spec, candidates=None) -> list:

@@ -14,8 +14,8 @@ and its CasADi criteria), :mod:`.estimator` (:class:`LikelihoodEstimator`), :mod
 from .estimator import LikelihoodEstimator, LikelihoodResult
 from .kstep import KStepResult, kstep_errors
 from .problem import LikelihoodOptions, LikelihoodProblem
-from .uncertainty import IdentifiabilityReport, ParameterInterval, identifiability
+from .uncertainty import IdentifiabilityReport, ParameterInterval, identifiability, wald_intervals
 
 __all__ = ["LikelihoodEstimator", "LikelihoodResult", "LikelihoodOptions",
            "LikelihoodProblem", "KStepResult", "kstep_errors", "IdentifiabilityReport",
-           "ParameterInterval", "identifiability"]
+           "ParameterInterval", "identifiability", "wald_intervals"]

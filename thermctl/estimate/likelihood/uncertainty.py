@@ -338,7 +338,7 @@ def _crossing(xs, ds, thr, bound):
 
 def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
                     method: str = "profile", robust: bool = True,
-                    threads: int = 1) -> "IdentifiabilityReport":
+                    threads: int = 1, wald=None) -> "IdentifiabilityReport":
     """Intervals and a verdict in plain words for R̄_v, τ0 (and so C_v).
 
     Parameters
@@ -357,6 +357,8 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
     threads : int
         Profiles, Hessian columns and block scores computed side by side (the result is
         the same).
+    wald : tuple, optional
+        :func:`wald_intervals` of this fit at ``level`` with ``robust``, computed already.
 
     Returns
     -------
@@ -367,7 +369,8 @@ def identifiability(estimator, params=("rbar_v", "tau0"), level: float = 0.9,
     estimator._check_fitted()
     pb, eta = estimator.problem_, estimator.eta_
     lay = pb.layout
-    wald, weak = wald_intervals(pb, eta, level, robust=robust, threads=threads)
+    wald, weak = wald if wald is not None else wald_intervals(pb, eta, level, robust=robust,
+                                                               threads=threads)
     intervals = dict(wald)
     names = [n for n in params if n in lay.names and not lay.params[lay.index(n)].fixed]
     if method == "profile":
