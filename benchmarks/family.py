@@ -240,6 +240,9 @@ def main(argv=None):
                     help="identify's --no-swaps (case names get ' [no swaps]'; the rows named "
                          "' [swaps]' were run when swaps were an option: --table shows them "
                          "as the default)")
+    ap.add_argument("--misfit-ratio", type=float, default=None, metavar="R",
+                    help="identify's --misfit-ratio (0: no misfit check; case names get "
+                         "' [misfit R]'; default rows before session 17 ran without the check)")
     args = ap.parse_args(argv)
     logging.getLogger("thermctl").setLevel(logging.ERROR)
     if args.table:
@@ -290,6 +293,9 @@ def main(argv=None):
         if args.no_swaps:
             sel["swaps"] = False
             name += " [no swaps]"
+        if args.misfit_ratio is not None:
+            sel["misfit_ratio"] = args.misfit_ratio
+            name += f" [misfit {args.misfit_ratio:g}]"
         row = run_case(study, name, kw, seed, days, estimation=est, selection=sel)
         rows.append(row)
         print(json.dumps(row), flush=True)
