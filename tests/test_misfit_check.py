@@ -52,7 +52,7 @@ def test_the_check_starts_from_the_selection_and_keeps_only_edges_that_predict(f
     plain, checked = fd_case[1e6], fd_case[4.0]
     steps = [st for st in checked.selection.path if st.action == "check"]
     assert len(steps) == 1
-    ratio = float(re.search(r"variance ratio (\d+)", steps[0].note).group(1))
+    ratio = float(re.search(r"variance ratio ([\d.]+)", steps[0].note).group(1))
     assert ratio > 4.0
     assert set(steps[0].edges) == _edges(plain)           # it starts where BIC stopped
     assert _edges(checked) <= _edges(plain)

@@ -1490,7 +1490,8 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
         if progress:
             progress(f"misfit check fits ({len(sel.edges)} air paths)", n, None)
 
-    head = (f"misfit check: R̄_v variance ratio {ratio:.0f} (sandwich/Hessian), above "
+    shown = f"{ratio:.1f}" if ratio < 10 else f"{ratio:.0f}"
+    head = (f"misfit check: R̄_v variance ratio {shown} (sandwich/Hessian), above "
             f"{lim:g}: every kept air path must also improve the 6-h prediction day after day "
             f"(t >= {MISFIT_PREDICT_T:g})")
     say(head.split(": ", 1)[1])
@@ -1505,8 +1506,16 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
     kept = {air_path_name(a, b) for a, b, _ in chk.edges}
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
     reasons = dict(sel.reasons)
+    tags = (" [parallel to a wall]", " [unmeasured end]")   # search_edges' own, once at the end
     for k, why in chk.reasons.items():
-        reasons[k] = f"{reasons[k].rstrip()}; misfit check: {why}" if k in reasons else why
+        if k not in reasons:
+            reasons[k] = why
+            continue
+        first, end = reasons[k], ""
+        for tag in tags:
+            if tag in first or tag in why:
+                first, why, end = first.replace(tag, ""), why.replace(tag, ""), end + tag
+        reasons[k] = f"{first.rstrip()}; misfit check: {why}{end}"
     start = chk.path[0]
     path = sel.path + [SelectionStep("check", None, start.value, 0.0, start.edges,
                                      note=head)] + chk.path[1:]
