@@ -140,17 +140,23 @@ def test_discretize_with_a_dense_noise_intensity_matches_van_loan():
     rng = np.random.default_rng(3)
     n, m, dt = 5, 2, 60.0
     M = rng.normal(size=(n, n))
-    A = -(M @ M.T) / n * 1e-2 - 1e-3 * np.eye(n)
+    # not symmetric (a transposed block would pass otherwise); real negative eigenvalues
+    A = -(M @ M.T / n * 1e-2 + 1e-3 * np.eye(n)) @ np.diag(rng.uniform(0.5, 2.0, n))
+    assert not np.allclose(A, A.T)
     B = rng.normal(size=(n, m)) * 1e-2
     L = rng.normal(size=(n, n)) * 1e-3
     Sig = L @ L.T
-    Phi, Gam, Q = kalman.discretize(ca.DM(A), ca.DM(B), ca.DM(Sig), dt, squarings=4)
     E = sla.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * dt)
     V = sla.expm(np.block([[-A, Sig], [np.zeros((n, n)), A.T]]) * dt)
     Q_ref = V[n:, n:].T @ V[:n, n:]
-    assert np.allclose(np.asarray(Phi), E[:n, :n], rtol=0, atol=1e-13)
-    assert np.allclose(np.asarray(Gam), E[:n, n:], rtol=1e-12, atol=0)
-    assert np.allclose(np.asarray(Q), 0.5 * (Q_ref + Q_ref.T), rtol=1e-11, atol=0)
+    # numeric (DM, casadi products) and symbolic (MX, the BLAS callbacks) paths
+    As, Bs, Ss = ca.MX.sym("A", n, n), ca.MX.sym("B", n, m), ca.MX.sym("S", n, n)
+    f = ca.Function("d", [As, Bs, Ss], list(kalman.discretize(As, Bs, Ss, dt, squarings=4)))
+    for Phi, Gam, Q in (kalman.discretize(ca.DM(A), ca.DM(B), ca.DM(Sig), dt, squarings=4),
+                        f(A, B, Sig)):
+        assert np.allclose(np.asarray(Phi), E[:n, :n], rtol=0, atol=1e-13)
+        assert np.allclose(np.asarray(Gam), E[:n, n:], rtol=1e-12, atol=0)
+        assert np.allclose(np.asarray(Q), 0.5 * (Q_ref + Q_ref.T), rtol=1e-11, atol=0)
 
 
 def test_dare_doubling_and_numpy_match_scipy(net5):

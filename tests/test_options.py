@@ -37,6 +37,8 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(selection=SelectionOptions(predict_t=float("nan"))), "selection.predict_t"),
     (IdentifyOptions(selection=SelectionOptions(predict_t="2")), "selection.predict_t"),
     (IdentifyOptions(selection=SelectionOptions(swaps="yes")), "selection.swaps"),
+    (IdentifyOptions(selection=SelectionOptions(misfit_ratio=-1.0)), "selection.misfit_ratio"),
+    (IdentifyOptions(selection=SelectionOptions(misfit_ratio=True)), "selection.misfit_ratio"),
     (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", wall_factors=True)),
      "wall_factors needs a Kalman criterion"),
     (IdentifyOptions(estimation=EstimationOptions(criterion="simulation", noise="zone")),

@@ -1474,8 +1474,17 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
         logger.info("misfit check: no variance ratio (%s); not checked", exc)
         sel.trials = {}
         return sel, None, False
+    finally:
+        gb.problem_.release_buffers()       # one set per thread; the intervals make their own
     iv = next((v for k, v in wald[0].items() if ConvectionParameters.is_rbar(k)), None)
-    ratio = 1.0 if iv is None else iv.inflation
+    at_bound = {b.split(" ")[0] for b in gb.problem_.layout.at_bounds(gb.eta_)}
+    if iv is None or iv.name in at_bound:
+        # R̄_v on a bound is left out of the Hessian's inversion: no ratio to judge by
+        notes.append("misfit check: not run, R̄_v is on a bound of its search range (no "
+                     "variance ratio to judge the innovations by)")
+        sel.trials = {}
+        return sel, (gb, wald), False
+    ratio = iv.inflation
     if not ratio > lim:
         logger.info("misfit check: R̄_v variance ratio %.1f (at most %g): not needed", ratio, lim)
         sel.trials = {}
@@ -1497,12 +1506,18 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
     say(head.split(": ", 1)[1])
     kw = dict(sel_kw, candidates=list(sel.edges), direction="backward", start=(), swaps=None,
               predict_t=MISFIT_PREDICT_T)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", BoundWarning)
-        chk = select_air_paths(spec, cal, progress=say, on_fit=on_fit,
-                               final_criterion=opt.estimation.criterion,
-                               workers=_threads(opt), known=sel.trials, **kw)
-    sel.trials = {}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            chk = select_air_paths(spec, cal, progress=say, on_fit=on_fit,
+                                   final_criterion=opt.estimation.criterion,
+                                   workers=_threads(opt), known=sel.trials, final=gb, **kw)
+    except (EstimationError, np.linalg.LinAlgError) as exc:
+        # the check is a second opinion: its failure leaves the selection as it was
+        notes.append(f"{head}, but it failed ({exc}); the selection stands unchecked")
+        return sel, (gb, wald), False
+    finally:
+        sel.trials = {}
     kept = {air_path_name(a, b) for a, b, _ in chk.edges}
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
     reasons = dict(sel.reasons)
@@ -1519,11 +1534,11 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
     start = chk.path[0]
     path = sel.path + [SelectionStep("check", None, start.value, 0.0, start.edges,
                                      note=head)] + chk.path[1:]
-    # nothing removed: the first selection's final fit stands (the check's own final fit
-    # is the same structure from the same start), and so do its Wald intervals
-    est, per_edge = (chk.estimator, chk.per_edge) if gone else (sel.estimator, sel.per_edge)
-    out = type(sel)(chk.edges, sel.candidates, path, reasons, sel.criterion, est, per_edge,
-                    sel.time + chk.time, sel.n_fits + chk.n_fits)
+    # nothing removed: the first selection's final fit stands (passed as `final`, not
+    # refitted), and so do its Wald intervals
+    per_edge = chk.per_edge if gone else sel.per_edge
+    out = type(sel)(chk.edges, sel.candidates, path, reasons, sel.criterion, chk.estimator,
+                    per_edge, sel.time + chk.time, sel.n_fits + chk.n_fits)
     notes.append(head + ": " + (f"removed {', '.join(gone)} (each helps the likelihood one "
                                 "step ahead but not the hours an MPC looks ahead)" if gone else
                                 "every one does, none removed") + ".")

@@ -105,7 +105,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
-                     ahead=None, swaps=None, known=None, **estimator_kwargs) -> SelectionResult:
+                     ahead=None, swaps=None, known=None, final=None,
+                     **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -172,6 +173,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     known : dict, optional
         Structures fitted already with the same data and model options (another
         selection's :attr:`SelectionResult.trials`); taken instead of fitted again.
+    final : LikelihoodEstimator, optional
+        The final fit of the ``candidates``' structure, made already (another selection's
+        :attr:`SelectionResult.estimator`): returned, not refitted, when the search keeps
+        every candidate.
     ahead : LikelihoodScorer, optional
         Fits started ahead (:meth:`LikelihoodScorer.speculate`) with the same options and
         data: the search takes their results instead of fitting again
@@ -210,7 +215,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])
     final_kw = dict(estimator_kwargs)
     final_kw.pop("per_edge", None)
-    if final_per_edge and final_criterion == "likelihood" and criterion != "holdout":
+    if final is not None and {x.name for x in cur} == {c.name for c in cands}:
+        pass                                # the structure it was made for: nothing to refit
+    elif final_per_edge and final_criterion == "likelihood" and criterion != "holdout":
         # the search's last fit is this very model (per edge, likelihood, all the data):
         # refitting it would cost one more fit for the same optimum
         final = est

@@ -289,8 +289,10 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             best_screen.update(screened)        # the last round's value: with the final edges
             pick = min(screened, key=screened.get)
             c = by_name[pick]
-            f_full, v_full = scorer.fit(cur + [c], warm=fitted)
-            done[frozenset(x.name for x in cur + [c])] = (f_full, v_full)
+            key = frozenset(x.name for x in cur + [c])
+            if key not in done:
+                done[key] = scorer.fit(cur + [c], warm=fitted)
+            f_full, v_full = done[key]
             d = v_full - val
             ok, _, why = holds(fitted, f_full) if d < -margin else (True, 0.0, "")
             if d < -margin and not ok:
