@@ -240,6 +240,8 @@ def main(argv=None):
                     help="identify's --no-swaps (case names get ' [no swaps]'; the rows named "
                          "' [swaps]' were run when swaps were an option: --table shows them "
                          "as the default)")
+    ap.add_argument("--per-edge", action="store_true",
+                    help="identify's --per-edge (case names get ' [per edge]')")
     ap.add_argument("--misfit-ratio", type=float, default=None, metavar="R",
                     help="identify's --misfit-ratio (0: no misfit check; case names get "
                          "' [misfit R]'; default rows before session 17 ran without the check)")
@@ -280,6 +282,8 @@ def main(argv=None):
             name, est["fast_gain"] = name + " [fast]", True
         if args.noise != "shared":
             name, est["noise"] = name + f" [noise {args.noise}]", args.noise
+        if args.per_edge:
+            name, est["per_edge"] = name + " [per edge]", True
         if args.common_gain:
             name, est["common_gain"] = name + f" [common {args.common_gain}]", args.common_gain
         sel = {}
