@@ -450,6 +450,13 @@ def test_verdict_texts_for_one_sided_and_bound_intervals():
     iv = ParameterInterval("rbar_v", 3e-4, 1e-6, 4e-4, 0.9, "profile", "K/(W m)",
                            closed_lower=False, closed_upper=True)
     assert "bounded above only" in _verdict(iv, None)
+    # closed on both sides but 4x wide (the twin house's bath door per path: ±274 %)
+    iv = ParameterInterval("rbar_v", 2.45e-3, 1.34e-3, 9.15e-3, 0.9, "profile", "K/(W m)")
+    v = _verdict(iv, None)
+    assert "not identified to a useful precision" in v and "factor 6.8" in v
+    assert "identified (within" not in v
+    iv = ParameterInterval("rbar_v", 3e-4, 2.5e-4, 3.6e-4, 0.9, "profile", "K/(W m)")
+    assert _verdict(iv, None).endswith("identified (within ±20 %).")
     est = SimpleNamespace(rbar_v_=2.6e-4)
     # τ0 on its upper bound, data close it below: C_v is the bound's, said so with the number
     tau = ParameterInterval("tau0", 2.03, 2.02, 2.03, 0.9, "profile", "s/m",
