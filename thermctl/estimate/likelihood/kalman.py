@@ -52,7 +52,7 @@ from ..._blas import single_thread_blas
 from ...errors import EstimationError
 from ._dense import dense_mtimes, linear_recursion
 
-__all__ = ["expm_taylor", "n_squarings", "discretize", "discretize_np", "dare_sda", "dare_np",
+__all__ = ["n_squarings", "discretize", "discretize_np", "dare_sda", "dare_np",
            "stein_np", "DareCallback", "process_noise_np",
            "stationary_filter", "kalman_filter", "filter_update", "filter_predict",
            "KalmanResult", "chunked_recursion", "LOG2PI"]
@@ -68,26 +68,6 @@ def _eye(n):
     return ca.DM.eye(n)
 
 
-def expm_taylor(M, order: int = _TAYLOR_ORDER):
-    """Matrix exponential by a Taylor series (Horner form); accurate only for ``‖M‖ ≲ 1/4``.
-
-    Parameters
-    ----------
-    M : casadi.MX, casadi.SX or casadi.DM, shape (n, n)
-    order : int
-        Degree of the polynomial.
-    """
-    n = M.shape[0]
-    I = _eye(n)
-    E = I + M / order
-    # E fills in after a few terms: BLAS beats CasADi's own loop on these products (twin
-    # house N2, 116 states: a likelihood gradient 0.128 → 0.095 s)
-    mt = dense_mtimes if isinstance(M, ca.MX) else ca.mtimes
-    for k in range(order - 1, 0, -1):
-        E = I + mt(M, E) / k
-    return E
-
-
 def n_squarings(norm_dt: float, target: float = _NORM_TARGET) -> int:
     """Number of halvings of ``dt`` that brings ``‖A‖·dt`` below ``target``.
 
@@ -96,7 +76,7 @@ def n_squarings(norm_dt: float, target: float = _NORM_TARGET) -> int:
     norm_dt : float
         An upper bound of ``‖A‖₁·dt`` over the parameter range [-].
     target : float
-        Norm at which :func:`expm_taylor` is used [-].
+        Norm at which :func:`discretize`'s Taylor polynomials are used [-].
     """
     if not np.isfinite(norm_dt):
         raise EstimationError(f"state matrix norm bound is not finite ({norm_dt})")
@@ -139,14 +119,16 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
     mts = ca.mtimes if Sigma.nnz() <= n else mt
     P, G, S = A * h, B * h, Sigma * h
     I = _eye(n)
-    # The Taylor polynomial (Horner, as expm_taylor) of two block matrices, by blocks:
+    # The Taylor polynomial (Horner form) of two block matrices, by blocks:
     #   [[P, G], [0, 0]]     -> [[Phi, Gamma], [0, I]]
     #   [[-P, S], [0, P^T]]  -> [[*, F12], [0, F22]]   (Van Loan: Q = F22^T F12)
     # F22 is Phi^T at every Horner stage (a polynomial in P commutes with P), the top-left
     # block of Van Loan's is not needed and the bottom-right of the first stays I. So a stage
     # costs two n×n products and one n×m, where the whole blocks cost an (n+m)-square and a
     # 2n-square product (8 n³): on the twin house N2 (123 states) the default identify took
-    # 175 s instead of 187 s (279 instead of 303 CPU s), the same selection path.
+    # 175 s instead of 187 s (279 instead of 303 CPU s), the same selection path. The
+    # products go through BLAS (dense_mtimes): the blocks fill in after a few terms, and
+    # CasADi's own loop was slower (twin house, 116 states: a gradient 0.128 → 0.095 s).
     E = I + P / order
     Gm = G / order
     F12 = S / order
