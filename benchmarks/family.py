@@ -142,6 +142,12 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
         i = iv["rbar_v"]
         row["interval"] = [float(i.lower), float(i.upper)]
         row["covers"] = bool(i.lower <= r_true <= i.upper)
+    else:
+        # one R̄_v per path: covered when every true path found has an interval around it
+        per = [iv.get(f"rbar_v[{e.name}]") for e in model.network.convection_edges
+               if tuple(sorted((e.a, e.b))) in visible]
+        if per and all(i is not None for i in per):
+            row["covers"] = all(i.lower <= r_true <= i.upper for i in per)
     row["notes"] = [str(n)[:200] for n in ident.notes]
     ms_min = minimum_flows(tb.inputs[:, tb.network.input_slices()["ms"]])
     if tb.settings.get("family", {}).get("plant") == "fd":

@@ -254,3 +254,21 @@ def test_identify_rejects_unknown_option_value(tb_dir, tmp_path):
               "--out", tmp_path / "o", "--candidates", "everything")
     assert res.exit_code == 2 and "candidates must be one of" in res.output
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("flags, want", [((), "auto"), (("--per-edge",), True),
+                                         (("--shared-rbar",), False)])
+def test_identify_per_edge_flags_reach_the_options(tb_dir, tmp_path, monkeypatch, flags, want):
+    """No flag: ``auto`` (per path when the misfit check's ratio is above its limit)."""
+    from thermctl.errors import DataError
+    seen = {}
+
+    def stop(meas, opt, progress=None):
+        seen["per_edge"] = opt.estimation.per_edge
+        raise DataError("stopped by the test")
+
+    monkeypatch.setattr("thermctl.identify.identify", stop)
+    res = run("identify", tb_dir / "data.csv", "--building", tb_dir / "building.yaml",
+              "--out", tmp_path / "o", *flags)
+    assert res.exit_code != 0 and "stopped by the test" in res.output
+    assert seen["per_edge"] == want and type(seen["per_edge"]) is type(want)

@@ -29,12 +29,14 @@ def fd_case():
                       control_minutes=5, plant="fd")
         meas = read_measurements(tb.data, tb.spec, name="fd")
     runs = {}
-    for ratio in (1e6, 4.0):
+    # (misfit ratio, per_edge): shared R̄_v to compare the check's fits with the first
+    # search's; "auto" (the default) to see R̄_v per path chosen by the same ratio
+    for ratio, pe in ((1e6, "auto"), (4.0, False), (4.0, "auto")):
         opt = IdentifyOptions(selection=SelectionOptions(misfit_ratio=ratio),
-                              estimation=EstimationOptions(intervals="none"))
+                              estimation=EstimationOptions(intervals="none", per_edge=pe))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            runs[ratio] = identify(meas, opt)
+            runs[ratio, pe] = identify(meas, opt)
     return runs
 
 
@@ -43,13 +45,14 @@ def _edges(ident):
 
 
 def test_below_the_threshold_nothing_is_checked(fd_case):
-    plain = fd_case[1e6]
+    plain = fd_case[1e6, "auto"]
+    assert np.ndim(plain.model.rbar_v) == 0       # auto: below the ratio, the shared value
     assert not any(st.action == "check" for st in plain.selection.path)
     assert not any(n.startswith("misfit check") for n in plain.notes)
 
 
 def test_the_check_starts_from_the_selection_and_keeps_only_edges_that_predict(fd_case):
-    plain, checked = fd_case[1e6], fd_case[4.0]
+    plain, checked = fd_case[1e6, "auto"], fd_case[4.0, False]
     steps = [st for st in checked.selection.path if st.action == "check"]
     assert len(steps) == 1
     ratio = float(re.search(r"variance ratio ([\d.]+)", steps[0].note).group(1))
@@ -78,6 +81,28 @@ def test_the_check_starts_from_the_selection_and_keeps_only_edges_that_predict(f
         assert np.allclose(checked.model.c_v, plain.model.c_v, rtol=0, atol=0)
 
 
+def test_above_the_ratio_auto_takes_the_searchs_per_path_fit(fd_case):
+    """``per_edge="auto"``: the same check, and the model is the search's own per-path fit
+    of what it keeps (no fit of its own); ``per_edge=False`` refits the shared value."""
+    shared, auto = fd_case[4.0, False], fd_case[4.0, "auto"]
+    edges = [e.name for e in auto.model.network.convection_edges]
+    assert edges == [e.name for e in shared.model.network.convection_edges] and edges
+    assert [st.edge for st in auto.selection.path] == [st.edge for st in shared.selection.path]
+    rb = np.atleast_1d(auto.model.rbar_v)
+    assert rb.shape == (len(edges),) and np.ndim(shared.model.rbar_v) == 0
+    assert np.allclose(rb, [auto.selection.per_edge[e] for e in edges], rtol=1e-12, atol=0)
+    # the shared value lies within the per-path values it compromises between
+    assert rb.min() <= float(shared.model.rbar_v) <= rb.max()
+    tau = rb * np.atleast_1d(auto.model.c_v)
+    assert np.allclose(tau, tau[0], rtol=1e-9)              # one τ0 for every path
+    assert auto.selection.n_fits <= shared.selection.n_fits
+    note = next(n for n in auto.notes if n.startswith("R̄_v one per air path"))
+    assert "variance ratio" in note and "--shared-rbar" in note
+    assert not any(n.startswith("R̄_v one per air path") for n in shared.notes)
+    # nested: the shared value is one point of the per-path search space
+    assert auto.greybox.nll_ <= shared.greybox.nll_ + 1e-6 * abs(shared.greybox.nll_)
+
+
 @pytest.mark.slow
 def test_the_twin_house_keeps_its_three_open_doors_and_no_coupling(twinhouse_spec_path):
     """The real house N2 with the defaults (about 4 min): BIC and swaps keep the 3 open doors
@@ -94,3 +119,9 @@ def test_the_twin_house_keeps_its_three_open_doors_and_no_coupling(twinhouse_spe
     assert doors < set(before) and len(before) == 7
     note = next(n for n in ident.notes if n.startswith("misfit check"))
     assert all(e in note for e in set(before) - doors)
+    # above the ratio R̄_v is one per door (auto): the bath's, which ventilation air runs
+    # through, is about 10x the others' (2.45e-3 against 2.2e-4 and 2.6e-4 K/(W m))
+    rb = dict(zip([e.name for e in ident.model.network.convection_edges],
+                  np.atleast_1d(ident.model.rbar_v)))
+    assert len(rb) == 3 and rb["air:bath-corridor"] > 4 * max(
+        rb["air:child-corridor"], rb["air:corridor-living"])

@@ -51,6 +51,7 @@ def test_the_model_carries_the_selections_per_path_values(runs):
 
 @pytest.mark.parametrize("est, match", [
     (EstimationOptions(per_edge="yes"), "estimation.per_edge"),
+    (EstimationOptions(per_edge=None), "estimation.per_edge"),
     (EstimationOptions(per_edge=True, criterion="simulation"), "per_edge needs a Kalman"),
 ])
 def test_per_edge_option_checks(est, match):

@@ -98,10 +98,14 @@ def identify(
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
-    per_edge: bool = typer.Option(_D.estimation.per_edge, "--per-edge/--shared-rbar",
-                                  help="Whole building, Kalman criteria: one R̄_v per air path "
-                                  "in the model (tau0 shared) instead of one shared value; "
-                                  "local problems always give per-path values."),
+    per_edge: bool | None = typer.Option(None, "--per-edge/--shared-rbar",
+                                            help="Whole building, likelihood: one R̄_v per air "
+                                            "path in the model (tau0 shared), or the paper's one "
+                                            "shared value. Default: per path when the shared "
+                                            "model's innovations are far from white (the misfit "
+                                            "check's ratio above --misfit-ratio), shared "
+                                            "otherwise; local problems always give per-path "
+                                            "values."),
     innovations: str = typer.Option(_D.estimation.innovations, help="Kalman criteria: "
                                     "distribution of the one-step innovations: gaussian, or "
                                     "student (a t whose degrees of freedom are fitted: gains "
@@ -257,7 +261,8 @@ def identify(
                                      innovations=innovations,
                                      fast_gain=_FAST_GAIN.get(fast_gain, fast_gain),
                                      noise=noise, common_gain=common_gain,
-                                     input_timing=input_timing, per_edge=per_edge),
+                                     input_timing=input_timing,
+                                     per_edge="auto" if per_edge is None else per_edge),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
