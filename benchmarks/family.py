@@ -89,6 +89,12 @@ LAYOUTS = {
 }
 
 
+def _plain(kwargs) -> dict:
+    """``generate()`` arguments as JSON: a callable building or a settings object by name."""
+    return {k: v if isinstance(v, (int, float, str, bool, type(None))) else
+            getattr(v, "__name__", repr(v)) for k, v in kwargs.items()}
+
+
 def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
     """Generate, identify with the defaults (``estimation``, ``selection``:
     EstimationOptions, SelectionOptions fields to change), score; one dict."""
@@ -110,7 +116,7 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
     measured = set(tb.spec.measured_zones)
     true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
     visible = {p for p in true if set(p) <= measured}
-    row = dict(study=study, case=name, seed=seed, days=days, kwargs=kwargs,
+    row = dict(study=study, case=name, seed=seed, days=days, kwargs=_plain(kwargs),
                building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
     if estimation:
@@ -220,7 +226,10 @@ def table(rows, study):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--study", choices=["factors", "family"], default="factors")
+    ap.add_argument("--study", choices=["factors", "family", "original"], default="factors",
+                    help="factors: Pugh Hall, one factor at a time; family: the broadened "
+                         "layouts with every factor on; original: the 6 layouts of "
+                         "benchmarks/identification.py (the family of the first table)")
     ap.add_argument("--cases", nargs="+", help="only these case names")
     ap.add_argument("--plants", nargs="+", default=["rc-exact", "fd"],
                     help="family study: plants (default both)")
@@ -262,7 +271,9 @@ def main(argv=None):
         out = ["The defaults include swaps since session 15 (rows run with the then-option "
                "--swaps count as default runs; since session 16 a swap round refits two "
                "different pairs); the earlier default runs stay in family-runs.jsonl.", ""]
-        for study in ("factors", "family"):
+        for study in ("factors", "family", "original"):
+            if not any(r["study"] == study for r in rows):
+                continue
             out += [f"## {study}", "", table(plain, study), ""]
             if any(r["study"] == study for r in opts):
                 out += [f"## {study}, with an option", "", table(opts, study), ""]
@@ -274,6 +285,10 @@ def main(argv=None):
         jobs = [("quick", "quick", dict(building="ring", zones=7, **ALL, plant="fd"), 0, 6.0)]
     elif args.study == "factors":
         jobs = [("factors", n, k, s, args.days) for n, k in FACTORS.items()
+                for s in args.seeds if not args.cases or n in args.cases]
+    elif args.study == "original":
+        from identification import LAYOUTS as ORIGINAL
+        jobs = [("original", n, k, s, args.days) for n, k in ORIGINAL.items()
                 for s in args.seeds if not args.cases or n in args.cases]
     else:
         jobs = [("family", f"{n} ({p})", dict(k, **ALL, plant=p), s, args.days)
