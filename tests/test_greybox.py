@@ -468,6 +468,12 @@ def test_verdict_texts_for_one_sided_and_bound_intervals():
                             closed_lower=False, closed_upper=False)
     v = _cv_verdict(tau, est)
     assert f"[{0.405 / 2.6e-4:.3g}, {2.03 / 2.6e-4:.3g}] J/K" in v
+    # one R̄_v per path (the twin house's doors): C_v = τ0/R̄_v per path, not one number
+    per = SimpleNamespace(rbar_v_=np.array([2.45e-3, 2.16e-4, 2.61e-4]))
+    tau = ParameterInterval("tau0", 2.03, 2.02, 2.03, 0.9, "profile", "s/m",
+                            closed_lower=True, closed_upper=False)
+    v = _cv_verdict(tau, per)
+    assert ", ".join(f"{2.03 / r:.3g}" for r in per.rbar_v_) + " (one per path)" in v
 
 
 def test_fast_gain_nests_the_random_walk_model(sim5, net5):

@@ -388,8 +388,11 @@ def _print_identification(ident):
     if ident.local is not None:
         console.print(ident.local.summary(), highlight=False)
     if m.network.convection_edges:
-        rb = np.atleast_1d(m.rbar_v)
-        console.print(f"R̄_v = {', '.join(f'{v:.3g}' for v in rb)} K/(W m), C_v = {float(np.mean(m.c_v)):.3g} J/K"
+        rb, cv = np.atleast_1d(m.rbar_v), np.atleast_1d(m.c_v)
+        # one value per path: C_v per path from the one τ0 = R̄_v·C_v they share
+        tau = f" (one τ0 = R̄_v·C_v = {rb[0] * cv[0]:.3g} s/m)" if cv.size > 1 else ""
+        console.print(f"R̄_v = {', '.join(f'{v:.3g}' for v in rb)} K/(W m), "
+                      f"C_v = {', '.join(f'{v:.3g}' for v in cv)} J/K{tau}"
                       f"  (alpha = {m.network.spec.alpha():.3f})", highlight=False)
     est = ident.estimate
     if est is not None and est.active_bounds:

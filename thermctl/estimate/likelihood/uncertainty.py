@@ -429,10 +429,14 @@ def _verdict(iv: ParameterInterval, pb) -> str:
 
 
 def _cv_verdict(tau: ParameterInterval, est) -> str:
-    rb = est.rbar_v_ if np.ndim(est.rbar_v_) == 0 else float(np.exp(np.mean(np.log(est.rbar_v_))))
+    # one R̄_v per path: C_v = τ0/R̄_v per path too; the interval on their geometric mean
+    per = np.atleast_1d(est.rbar_v_) if np.ndim(est.rbar_v_) else None
+    rb = est.rbar_v_ if per is None else float(np.exp(np.mean(np.log(per))))
     lo, hi = tau.lower / rb, tau.upper / rb
+    val = (_fmt(tau.value / rb) if per is None or per.size < 2 else
+           ", ".join(_fmt(tau.value / r) for r in per) + " (one per path)")
     if tau.identifiable:
-        return (f"C_v = {_fmt(tau.value / rb)} J/K (from τ0 and R̄_v), interval about "
+        return (f"C_v = {val} J/K (from τ0 and R̄_v), interval about "
                 f"[{_fmt(lo)}, {_fmt(hi)}] J/K: identified.")
     # one side closed by the data, the other open with the estimate on it: the bound decides
     on_bound = (tau.closed_lower and not tau.closed_upper
@@ -441,7 +445,7 @@ def _cv_verdict(tau: ParameterInterval, est) -> str:
     if on_bound:
         return (f"C_v: not identifiable — τ0 = R̄_v·C_v sits on its search bound "
                 f"({_fmt(tau.value)} s/m, from t_min/α or t_max/α), so C_v = τ0/R̄_v = "
-                f"{_fmt(tau.value / rb)} J/K is set by that bound, not by the data; the convection "
+                f"{val} J/K is set by that bound, not by the data; the convection "
                 "edge's own time constant (seconds) is far below the data step, so the data only "
                 "see its resistance. The reported C_v is not a measurement.")
     return (f"C_v: not identifiable — any value in about [{_fmt(lo)}, {_fmt(hi)}] J/K "
