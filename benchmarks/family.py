@@ -270,7 +270,12 @@ def main(argv=None):
         opts = [r for r in rows if " [" in r["case"]]
         out = ["The defaults include swaps since session 15 (rows run with the then-option "
                "--swaps count as default runs; since session 16 a swap round refits two "
-               "different pairs); the earlier default runs stay in family-runs.jsonl.", ""]
+               "different pairs); the earlier default runs stay in family-runs.jsonl. Since "
+               "session 17 the misfit check runs where R̄_v's variance ratio is above 4, and "
+               "since session 18 the model then carries R̄_v per path (the 8 cases it "
+               "concerns were re-run; the others are unchanged by it). A per-path model's R̄v "
+               "is the geometric mean of its paths' values; it covers when every true "
+               "path's interval does.", ""]
         for study in ("factors", "family", "original"):
             if not any(r["study"] == study for r in rows):
                 continue

@@ -57,3 +57,36 @@ def test_the_model_carries_the_selections_per_path_values(runs):
 def test_per_edge_option_checks(est, match):
     with pytest.raises(DataError, match=match):
         IdentifyOptions(estimation=est).check()
+
+
+def test_per_path_intervals_take_in_the_shared_models():
+    """Where the misfit chose one R̄_v per path, each path's interval is widened to take in
+    the shared model's, and its verdict recomputed: the finite-volume factor case (all
+    factors, seed 1) had r240–r243 at 2.52e-4 [2.06e-4, 3.15e-4] "identified (within
+    ±25 %)" for a truth of 3.36e-4; the shared interval was [1.73e-4, 6.9e-4]."""
+    from thermctl.estimate.likelihood.uncertainty import (IdentifiabilityReport,
+                                                          ParameterInterval, _verdict)
+    from thermctl.identify import _per_path_widen
+
+    def iv(name, v, lo, hi):
+        return ParameterInterval(name, v, lo, hi, 0.9, "profile", "K/(W m)")
+    ints = {"rbar_v[air:r240-r243]": iv("rbar_v[air:r240-r243]", 2.52e-4, 2.06e-4, 3.15e-4),
+            "rbar_v[air:r241-r244]": iv("rbar_v[air:r241-r244]", 9.87e-4, 3.03e-4, 1e-2),
+            "tau0": ParameterInterval("tau0", 2.03, 0.416, 2.03, 0.9, "profile", "s/m")}
+    ida = IdentifiabilityReport(ints, {}, [], {k: _verdict(v, None) for k, v in ints.items()},
+                                0.9)
+    assert ida.verdicts["rbar_v[air:r240-r243]"].endswith("identified (within ±25 %).")
+    tau_verdict = ida.verdicts["tau0"]
+    notes = []
+    _per_path_widen(ida, iv("rbar_v", 3.45e-4, 1.73e-4, 6.9e-4), notes)
+    a = ida.intervals["rbar_v[air:r240-r243]"]
+    assert (a.lower, a.upper, a.value) == (1.73e-4, 6.9e-4, 2.52e-4) and a.covers(3.36e-4)
+    v = ida.verdicts["rbar_v[air:r240-r243]"]
+    assert "within a factor 4.0: not identified to a useful precision" in v
+    assert "shared R̄_v's interval [0.000173, 0.00069]" in v and v.endswith(".")
+    b = ida.intervals["rbar_v[air:r241-r244]"]
+    assert (b.lower, b.upper) == (1.73e-4, 1e-2)           # only ever widened
+    assert ida.verdicts["tau0"] == tau_verdict and ida.intervals["tau0"].lower == 0.416
+    assert len(notes) == 1 and "far from white" in notes[0]
+    _per_path_widen(None, ints["tau0"], notes)              # no intervals: nothing to do
+    assert len(notes) == 1

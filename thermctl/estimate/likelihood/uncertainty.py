@@ -109,6 +109,14 @@ class IdentifiabilityReport:
     verdicts: dict
     level: float
 
+    def widen(self, name: str, lower: float, upper: float, why: str) -> None:
+        """Widen the interval of ``name`` to take in ``[lower, upper]`` and say ``why`` in
+        its verdict: an uncertainty of the model itself, which one model's likelihood does
+        not see (its verdict is recomputed from the widened interval)."""
+        iv = self.intervals[name]
+        iv.lower, iv.upper = min(iv.lower, lower), max(iv.upper, upper)
+        self.verdicts[name] = _verdict(iv, None)[:-1] + f"; {why}."
+
     def __str__(self):
         lines = [f"identifiability ({100 * self.level:.0f} % intervals):"]
         lines += [f"  {v}" for v in self.verdicts.values()]
