@@ -1616,20 +1616,19 @@ def _shared_interval(spec, cal, opt, chk):
     init = {k: v for k, v in est.params_.items()
             if not ConvectionParameters.is_rbar(k, per_edge=True)}
     init["rbar_v"] = float(np.exp(np.mean(np.log(list(chk.per_edge.values())))))
+    fit = LikelihoodEstimator(ThermalNetwork(spec, chk.edges), opt.estimation.criterion,
+                              solar=opt.estimation.solar, **_mass_options(opt))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            fit = LikelihoodEstimator(ThermalNetwork(spec, chk.edges), opt.estimation.criterion,
-                                      solar=opt.estimation.solar,
-                                      **_mass_options(opt)).fit(cal, init=init)
-            iv = wald_intervals(fit.problem_, fit.eta_, threads=_threads(opt))[0].get("rbar_v")
+            fit.fit(cal, init=init)
+            return wald_intervals(fit.problem_, fit.eta_, threads=_threads(opt))[0].get("rbar_v")
     except (EstimationError, np.linalg.LinAlgError) as exc:
         logger.info("per-path R̄_v: no shared interval to compare with (%s)", exc)
         return None
     finally:
-        if "fit" in locals():
+        if hasattr(fit, "problem_"):
             fit.problem_.release_buffers()
-    return iv
 
 
 def _per_path_widen(ida, shared, notes) -> None:
