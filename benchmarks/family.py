@@ -257,6 +257,9 @@ def main(argv=None):
                          "as the default)")
     ap.add_argument("--per-edge", action="store_true",
                     help="identify's --per-edge (case names get ' [per edge]')")
+    ap.add_argument("--shared-rbar", action="store_true",
+                    help="identify's --shared-rbar: one R̄_v even where the misfit check runs "
+                         "(case names get ' [shared]')")
     ap.add_argument("--misfit-ratio", type=float, default=None, metavar="R",
                     help="identify's --misfit-ratio (0: no misfit check; case names get "
                          "' [misfit R]'; default rows before session 17 ran without the check)")
@@ -310,6 +313,8 @@ def main(argv=None):
             name, est["noise"] = name + f" [noise {args.noise}]", args.noise
         if args.per_edge:
             name, est["per_edge"] = name + " [per edge]", True
+        if args.shared_rbar:
+            name, est["per_edge"] = name + " [shared]", False
         if args.common_gain:
             name, est["common_gain"] = name + f" [common {args.common_gain}]", args.common_gain
         sel = {}
