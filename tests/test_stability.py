@@ -228,7 +228,7 @@ def test_an_edge_below_the_threshold_is_dropped_and_the_model_refitted():
     notes = []
     opt = IdentifyOptions()
     opt.estimation.solar = False
-    out = _drop_unstable(meas.spec, cal, opt, sel, stab, notes)
+    out = _drop_unstable(meas.spec, cal, opt, sel, stab, notes, False)
     assert [e[:2] for e in out.edges] == [("r240", "r243")]
     assert [e.name for e in out.estimator.network.convection_edges] == ["air:r240-r243"]
     assert out.stability is stab and stab.dropped == ["air:r242-r244"]
