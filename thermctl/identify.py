@@ -788,7 +788,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                 _per_path_widen(ida, shared, notes)
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
-            _misfit_note(ida, opt, notes, checked)
+            _misfit_note(ida, opt, notes, checked,
+                         ratio=shared.inflation if per_edge and shared is not None else None)
     if gb is not None:
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     else:
@@ -1675,14 +1676,19 @@ def _per_path_model(sel, trials, shown, lim, notes):
     return replace(sel, estimator=got[0])
 
 
-def _misfit_note(ida, opt, notes, checked: bool = False):
-    """Say so when the innovations are far from white: BIC then overstates the evidence."""
-    iv = None if ida is None else next(
-        (v for k, v in ida.intervals.items() if k.startswith("rbar_v")), None)
-    if iv is None or iv.inflation <= MISFIT_RATIO:
+def _misfit_note(ida, opt, notes, checked: bool = False, ratio: float | None = None):
+    """Say so when the innovations are far from white: BIC then overstates the evidence.
+    ``ratio``: the variance ratio of one shared R̄_v on the model's structure (a per-path
+    model has one ratio per path; the note gives the shared value's, as the misfit check
+    does, not the first path's)."""
+    if ratio is None:
+        iv = None if ida is None else next(
+            (v for k, v in ida.intervals.items() if k.startswith("rbar_v")), None)
+        ratio = None if iv is None else iv.inflation
+    if ratio is None or ratio <= MISFIT_RATIO:
         return
     head = (f"the model's one-step innovations are far from white (sandwich/Hessian variance "
-            f"ratio {iv.inflation:.0f} for R̄_v): ")
+            f"ratio {ratio:.0f} for R̄_v): ")
     if opt.selection.criterion == "holdout":
         notes.append(
             head + "its intervals are widened by that much; the air paths were kept for what "
