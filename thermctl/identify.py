@@ -765,8 +765,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                                    final_criterion=opt.estimation.criterion,
                                    final_per_edge=_per_edge_set(opt.estimation),
                                    workers=_threads(opt), ahead=ahead, **sel_kw)
-            sel, wald, checked, per_edge, shared = _misfit_check(spec, cal, opt, sel, sel_kw,
-                                                                 notes, progress)
+            chk = _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress)
+            sel, wald, per_edge = chk.sel, chk.wald, chk.per_edge
         if opt.selection.stability:
             from .stability import stability_selection
             stab = stability_selection(spec, cal, resamples=opt.selection.stability,
@@ -785,11 +785,12 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             if not per_edge:                    # a per-path model holds no compromise
                 _shared_rbar_check(ida, sel.per_edge, notes)
             else:
-                _per_path_widen(ida, shared, notes)
+                _per_path_widen(ida, chk.shared, notes)
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
-            _misfit_note(ida, opt, notes, checked,
-                         ratio=shared.inflation if per_edge and shared is not None else None)
+            _misfit_note(ida, opt, notes, chk.checked,
+                         ratio=chk.shared.inflation if per_edge and chk.shared is not None
+                         else None)
     if gb is not None:
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     else:
@@ -1487,12 +1488,23 @@ must reach when the misfit check runs (``SelectionOptions.misfit_ratio``) [-]: t
 ``--predict-t 2`` of the options, which on the twin house N2 keeps the 3 open doors alone."""
 
 
-def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
-    """``(sel, wald, checked, per_edge, shared)``: the selection after the misfit check, the
-    robust Wald intervals of the fit they were computed on (``(estimator, (intervals,
-    weak))``, None if not computed), whether the check ran, whether the model carries one
-    R̄_v per path (``estimation.per_edge`` resolved) and, when ``auto`` chose per path, the
-    robust Wald interval of the shared R̄_v of the same structure (else None).
+@dataclass
+class _Checked:
+    """What :func:`_misfit_check` leaves: the selection after it; the robust Wald intervals
+    of the fit they were computed on (``(estimator, (intervals, weak))``, None if not
+    computed, for the intervals to reuse); whether the check ran; whether the model carries
+    one R̄_v per path (``estimation.per_edge`` resolved); and, when ``auto`` chose per path,
+    the robust Wald interval of one shared R̄_v on the same structure (else None)."""
+
+    sel: object
+    wald: tuple | None = None
+    checked: bool = False
+    per_edge: bool = False
+    shared: object = None
+
+
+def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
+    """The selection after the misfit check (:class:`_Checked`).
 
     The check: when the selected model's R̄_v has a sandwich/Hessian variance ratio above
     ``selection.misfit_ratio``, its innovations are far from white and BIC's differences
@@ -1512,7 +1524,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
     check = opt.selection.predict_t is None
     if (not lim or not (check or auto) or opt.selection.criterion == "holdout"
             or not sel.edges or getattr(gb, "criterion", None) != "likelihood"):
-        return sel, None, False, fixed, None
+        return _Checked(sel, per_edge=fixed)
     from .estimate.likelihood import wald_intervals
     try:
         with warnings.catch_warnings():
@@ -1520,7 +1532,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
             wald = wald_intervals(gb.problem_, gb.eta_, threads=_threads(opt))
     except (EstimationError, np.linalg.LinAlgError) as exc:
         logger.info("misfit check: no variance ratio (%s); not checked", exc)
-        return sel, None, False, fixed, None
+        return _Checked(sel, per_edge=fixed)
     finally:
         gb.problem_.release_buffers()       # one set per thread; the intervals make their own
     # the shared R̄_v, or the path with the largest ratio (--per-edge) among those not on a
@@ -1532,18 +1544,18 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
         # R̄_v on a bound is left out of the Hessian's inversion: no ratio to judge by
         notes.append("misfit check: not run, R̄_v is on a bound of its search range (no "
                      "variance ratio to judge the innovations by)")
-        return sel, (gb, wald), False, fixed, None
+        return _Checked(sel, (gb, wald), per_edge=fixed)
     ratio = iv.inflation
     if not ratio > lim:
         logger.info("misfit check: R̄_v variance ratio %.1f (at most %g): not needed", ratio, lim)
-        return sel, (gb, wald), False, fixed, None
+        return _Checked(sel, (gb, wald), per_edge=fixed)
     shown = f"{ratio:.1f}" if ratio < 10 else f"{ratio:.0f}"
     per_edge = fixed or auto
     shared = iv if auto else None           # gb is the shared fit when auto
     if not check:
         # --predict-t: the selection asked the prediction test already; only R̄_v is decided
         out = _per_path_model(sel, trials, shown, lim, notes)
-        return out, None, False, out.estimator is not gb, shared
+        return _Checked(out, per_edge=out.estimator is not gb, shared=shared)
     from .selection import select_air_paths
     from .structure.search import SelectionStep
 
@@ -1575,8 +1587,8 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
         notes.append(f"{head}, but it failed ({exc}); the selection stands unchecked")
         if auto:
             out = _per_path_model(sel, trials, shown, lim, notes)
-            return out, None, False, out.estimator is not gb, shared
-        return sel, (gb, wald), False, fixed, None
+            return _Checked(out, per_edge=out.estimator is not gb, shared=shared)
+        return _Checked(sel, (gb, wald), per_edge=fixed)
     kept = {air_path_name(a, b) for a, b, _ in chk.edges}
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
     reasons = dict(sel.reasons)
@@ -1605,8 +1617,8 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress):
         notes.append(_per_path_note(pe_values, shown, lim))
         if gone:
             shared = _shared_interval(spec, cal, opt, chk)
-    return (out, ((gb, wald) if not gone and out.estimator is gb else None), True, per_edge,
-            shared if auto else None)
+    return _Checked(out, (gb, wald) if not gone and out.estimator is gb else None, True,
+                    per_edge, shared if auto else None)
 
 
 def _shared_interval(spec, cal, opt, chk):
