@@ -237,6 +237,16 @@ def test_an_edge_below_the_threshold_is_dropped_and_the_model_refitted():
     note = next(n for n in notes if n.startswith("stability selection ("))
     assert "dropped air:r242-r244" in note and "\n" not in note
     assert sel.edges != out.edges                     # the full data's selection is kept
+    # per path (the misfit check's auto choice): the same drop, and the shared interval the
+    # per-path ones take in is refitted on the one path kept — where one shared value and
+    # one per path are the same model, so the same R̄_v
+    from thermctl.identify import _shared_interval
+    pe = _drop_unstable(meas.spec, cal, opt, sel, stab, [], True)
+    assert list(pe.per_edge) == ["air:r240-r243"]
+    iv = _shared_interval(meas.spec, cal, opt, pe)
+    assert iv is not None and iv.lower < iv.value < iv.upper
+    assert iv.value == pytest.approx(pe.per_edge["air:r240-r243"], rel=1e-3)
+    assert float(np.atleast_1d(pe.estimator.rbar_v_)[0]) == pytest.approx(iv.value, rel=1e-3)
 
 
 def test_resamples_shorter_than_three_days_are_called_out():

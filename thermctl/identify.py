@@ -772,7 +772,11 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             stab = stability_selection(spec, cal, resamples=opt.selection.stability,
                                        seed=opt.selection.stability_seed,
                                        workers=opt.split.workers, progress=progress, **sel_kw)
+            kept = sel.edges
             sel = _drop_unstable(spec, cal, opt, sel, stab, notes, per_edge)
+            if chk.shared is not None and sel.edges != kept and sel.edges:
+                # the shared interval the per-path ones take in: of the structure kept
+                chk.shared = _shared_interval(spec, cal, opt, sel)
         net = ThermalNetwork(spec, sel.edges)
         _lost_data_note(sel.reasons.items(), {air_path_name(a, b) for a, b, _ in sel.edges},
                         notes)
@@ -1116,6 +1120,10 @@ def _drop_unstable(spec, cal, opt, sel, stab, notes, pe: bool):
         out.estimator = LikelihoodEstimator(
             ThermalNetwork(spec, kept), opt.estimation.criterion, solar=opt.estimation.solar,
             per_edge=pe, **_mass_options(opt)).fit(cal, init=init)
+    if pe:
+        # the model's own per-path values: the refit's, not the larger structure's
+        rb, _ = out.estimator.problem_.rbar_c(out.estimator.eta_)
+        out.per_edge = {e.name: float(r) for e, r in zip(out.estimator.problem_.edges, rb)}
     return out
 
 
@@ -1622,8 +1630,9 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
 
 
 def _shared_interval(spec, cal, opt, chk):
-    """The robust Wald interval of one shared R̄_v fitted on the structure the check kept
-    (started from its per-path fit); None, with a log line, if the fit or the Hessian fails."""
+    """The robust Wald interval of one shared R̄_v fitted on the structure of ``chk`` (a
+    :class:`SelectionResult` whose estimator is its per-path fit, the start); None, with a
+    log line, if the fit or the Hessian fails."""
     from .estimate.likelihood import LikelihoodEstimator, wald_intervals
     est = chk.estimator
     init = {k: v for k, v in est.params_.items()
