@@ -37,6 +37,13 @@ def fd_case():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             runs[ratio, pe] = identify(meas, opt)
+    # --predict-t set: the selection ran the prediction test itself, so no check; the ratio
+    # still chooses R̄_v per path
+    opt = IdentifyOptions(selection=SelectionOptions(predict_t=2.0),
+                          estimation=EstimationOptions(intervals="none"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runs["predict"] = identify(meas, opt)
     return runs
 
 
@@ -101,6 +108,17 @@ def test_above_the_ratio_auto_takes_the_searchs_per_path_fit(fd_case):
     assert not any(n.startswith("R̄_v one per air path") for n in shared.notes)
     # nested: the shared value is one point of the per-path search space
     assert auto.greybox.nll_ <= shared.greybox.nll_ + 1e-6 * abs(shared.greybox.nll_)
+
+
+def test_with_predict_t_there_is_no_check_but_the_ratio_still_chooses_per_path(fd_case):
+    ident = fd_case["predict"]
+    assert not any(st.action == "check" for st in ident.selection.path)
+    assert not any(n.startswith("misfit check") for n in ident.notes)
+    edges = [e.name for e in ident.model.network.convection_edges]
+    rb = np.atleast_1d(ident.model.rbar_v)
+    assert edges and rb.shape == (len(edges),)
+    assert np.allclose(rb, [ident.selection.per_edge[e] for e in edges], rtol=1e-12, atol=0)
+    assert any(n.startswith("R̄_v one per air path") for n in ident.notes)
 
 
 @pytest.mark.slow
