@@ -143,3 +143,25 @@ def test_the_twin_house_keeps_its_three_open_doors_and_no_coupling(twinhouse_spe
                   np.atleast_1d(ident.model.rbar_v)))
     assert len(rb) == 3 and rb["air:bath-corridor"] > 4 * max(
         rb["air:child-corridor"], rb["air:corridor-living"])
+
+
+def test_a_check_that_cannot_run_says_so(monkeypatch):
+    """No variance ratio (the Hessian fails): a note, not only a log line."""
+    from types import SimpleNamespace
+
+    import thermctl.estimate.likelihood as lik
+    from thermctl.errors import EstimationError
+    from thermctl.identify import _misfit_check
+
+    def fail(*args, **kwargs):
+        raise EstimationError("singular Hessian")
+
+    monkeypatch.setattr(lik, "wald_intervals", fail)
+    est = SimpleNamespace(criterion="likelihood", eta_=None,
+                          problem_=SimpleNamespace(release_buffers=lambda: None))
+    sel = SimpleNamespace(estimator=est, trials={}, edges=[("a", "b", 2.0)])
+    notes = []
+    out = _misfit_check(None, None, IdentifyOptions(), sel, {}, notes, None)
+    assert out.sel is sel and not out.checked and out.wald is None and not out.per_edge
+    assert notes == ["misfit check: not run, no variance ratio for R̄_v (singular Hessian); "
+                     "the structure is BIC's alone"]

@@ -1539,7 +1539,10 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
             warnings.simplefilter("ignore")
             wald = wald_intervals(gb.problem_, gb.eta_, threads=_threads(opt))
     except (EstimationError, np.linalg.LinAlgError) as exc:
-        logger.info("misfit check: no variance ratio (%s); not checked", exc)
+        # said in the notes, not only the log: a check that silently did not run reads as
+        # a model whose innovations passed it
+        notes.append(f"misfit check: not run, no variance ratio for R̄_v ({exc}); the "
+                     "structure is BIC's alone")
         return _Checked(sel, per_edge=fixed)
     finally:
         gb.problem_.release_buffers()       # one set per thread; the intervals make their own
