@@ -90,3 +90,21 @@ def test_per_path_intervals_take_in_the_shared_models():
     assert len(notes) == 1 and "far from white" in notes[0]
     _per_path_widen(None, ints["tau0"], notes)              # no intervals: nothing to do
     assert len(notes) == 1
+
+
+def test_widening_keeps_what_the_calibration_length_and_the_bounds_say():
+    """A widened interval keeps a short-calibration verdict, and a side that moves out to a
+    search bound (open) is open: "bounded ... only", not "identified"."""
+    from thermctl.estimate.likelihood.uncertainty import (IdentifiabilityReport,
+                                                          ParameterInterval, _verdict)
+    iv = ParameterInterval("rbar_v[air:a-b]", 3e-4, 2.7e-4, 3.3e-4, 0.9, "profile", "K/(W m)")
+    short = IdentifiabilityReport({iv.name: iv}, {}, [], {iv.name: "not identified — 1.5 "
+                                                          "calibration day(s)"}, 0.9)
+    short.short_calibration_days = 1.5
+    short.widen(iv.name, 2.5e-4, 3.5e-4, "widened")
+    assert short.verdicts[iv.name].startswith("not identified — 1.5")
+    iv = ParameterInterval("rbar_v[air:a-b]", 3e-4, 2.7e-4, 3.3e-4, 0.9, "profile", "K/(W m)")
+    rep = IdentifiabilityReport({iv.name: iv}, {}, [], {iv.name: _verdict(iv, None)}, 0.9)
+    rep.widen(iv.name, 1e-6, 3.2e-4, "widened", closed=(False, True))
+    assert (iv.lower, iv.upper, iv.closed_lower, iv.closed_upper) == (1e-6, 3.3e-4, False, True)
+    assert "bounded above only" in rep.verdicts[iv.name]

@@ -241,8 +241,17 @@ def test_an_edge_below_the_threshold_is_dropped_and_the_model_refitted():
     # per-path ones take in is refitted on the one path kept — where one shared value and
     # one per path are the same model, so the same R̄_v
     from thermctl.identify import _shared_interval
-    pe = _drop_unstable(meas.spec, cal, opt, sel, stab, [], True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sel_pe = select_air_paths(meas.spec, cal, candidates=[("r240", "r243"), ("r242", "r244")],
+                                  direction="backward", max_iter=60, solar=False,
+                                  final_per_edge=True)
+    assert np.ndim(sel_pe.estimator.rbar_v_) == 1          # a per-path model, as auto leaves
+    pe = _drop_unstable(meas.spec, cal, opt, sel_pe, stab, [], True)
     assert list(pe.per_edge) == ["air:r240-r243"]
+    # the model's per-path value is the refit's, not the two-path fit's
+    assert pe.per_edge["air:r240-r243"] == float(np.atleast_1d(pe.estimator.rbar_v_)[0])
+    assert pe.per_edge["air:r240-r243"] != sel_pe.per_edge["air:r240-r243"]
     iv = _shared_interval(meas.spec, cal, opt, pe)
     assert iv is not None and iv.lower < iv.value < iv.upper
     assert iv.value == pytest.approx(pe.per_edge["air:r240-r243"], rel=1e-3)

@@ -287,9 +287,11 @@ class EstimationOptions:
         disagree the shared value is a compromise: on the twin house N2 (per-path values
         2.2e-4 to 2.4e-3 K/(W m)) the held-back k-step RMSE at 1 / 6 / 24 h is 0.061 /
         0.238 / 0.328 K per path against 0.063 / 0.254 / 0.352 K shared (conduction-only
-        0.062 / 0.260 / 0.380). ``auto`` (default, likelihood criterion): per path when the
-        shared model's innovations are far from white (its R̄_v's sandwich/Hessian variance
-        ratio above ``selection.misfit_ratio``, the misfit check's test), shared otherwise.
+        0.062 / 0.260 / 0.380). ``auto`` (default): per path when the shared model's
+        innovations are far from white (its R̄_v's sandwich/Hessian variance ratio above
+        ``selection.misfit_ratio``, the misfit check's test), shared otherwise — and shared
+        with ``criterion="kstep"``, holdout selection or ``misfit_ratio=0``, which compute
+        no ratio.
         Where the model is right one value is what the data fix best: on the Pugh Hall
         factor study per path for all 36 cases gives a median step-response error of 9.9 %
         against 2.3 % shared (single paths' values scatter by a factor 4 on 10 days); on
@@ -774,7 +776,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                                        workers=opt.split.workers, progress=progress, **sel_kw)
             kept = sel.edges
             sel = _drop_unstable(spec, cal, opt, sel, stab, notes, per_edge)
-            if chk.shared is not None and sel.edges != kept and sel.edges:
+            if (chk.shared is not None and sel.edges != kept and sel.edges
+                    and opt.estimation.intervals != "none"):
                 # the shared interval the per-path ones take in: of the structure kept
                 chk.shared = _shared_interval(spec, cal, opt, sel)
         net = ThermalNetwork(spec, sel.edges)
@@ -1541,8 +1544,9 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
     except (EstimationError, np.linalg.LinAlgError) as exc:
         # said in the notes, not only the log: a check that silently did not run reads as
         # a model whose innovations passed it
-        notes.append(f"misfit check: not run, no variance ratio for R̄_v ({exc}); the "
-                     "structure is BIC's alone")
+        notes.append(f"misfit check: not run, no variance ratio for R̄_v ({exc}); "
+                     + ("the structure is BIC's alone" if check else
+                        "R̄_v is the shared value"))
         return _Checked(sel, per_edge=fixed)
     finally:
         gb.problem_.release_buffers()       # one set per thread; the intervals make their own
@@ -1566,7 +1570,8 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
     if not check:
         # --predict-t: the selection asked the prediction test already; only R̄_v is decided
         out = _per_path_model(sel, trials, shown, lim, notes)
-        return _Checked(out, per_edge=out.estimator is not gb, shared=shared)
+        per = out.estimator is not gb
+        return _Checked(out, per_edge=per, shared=shared if per else None)
     from .selection import select_air_paths
     from .structure.search import SelectionStep
 
@@ -1598,7 +1603,8 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         notes.append(f"{head}, but it failed ({exc}); the selection stands unchecked")
         if auto:
             out = _per_path_model(sel, trials, shown, lim, notes)
-            return _Checked(out, per_edge=out.estimator is not gb, shared=shared)
+            per = out.estimator is not gb
+            return _Checked(out, per_edge=per, shared=shared if per else None)
         return _Checked(sel, (gb, wald), per_edge=fixed)
     kept = {air_path_name(a, b) for a, b, _ in chk.edges}
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
@@ -1626,8 +1632,11 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
                                 "every one does, none removed") + ".")
     if auto and chk.edges:
         notes.append(_per_path_note(pe_values, shown, lim))
-        if gone:
+        if gone and opt.estimation.intervals != "none":
+            # the per-path intervals take this in; with no intervals it is not needed
             shared = _shared_interval(spec, cal, opt, chk)
+        elif gone:
+            shared = None
     return _Checked(out, (gb, wald) if not gone and out.estimator is gb else None, True,
                     per_edge, shared if auto else None)
 
@@ -1669,7 +1678,8 @@ def _per_path_widen(ida, shared, notes) -> None:
         ida.widen(k, shared.lower, shared.upper,
                   f"widened to take in the shared R̄_v's interval [{shared.lower:.3g}, "
                   f"{shared.upper:.3g}]: the model misfits, and the data do not tell one value "
-                  "per path from one shared value")
+                  "per path from one shared value",
+                  closed=(shared.closed_lower, shared.closed_upper))
     if keys:
         notes.append(f"per-path R̄_v intervals widened to take in the shared model's "
                      f"[{shared.lower:.3g}, {shared.upper:.3g}] K/(W m): one value per path was "

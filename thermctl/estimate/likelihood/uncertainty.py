@@ -109,12 +109,22 @@ class IdentifiabilityReport:
     verdicts: dict
     level: float
 
-    def widen(self, name: str, lower: float, upper: float, why: str) -> None:
+    def widen(self, name: str, lower: float, upper: float, why: str,
+              closed: tuple[bool, bool] = (True, True)) -> None:
         """Widen the interval of ``name`` to take in ``[lower, upper]`` and say ``why`` in
         its verdict: an uncertainty of the model itself, which one model's likelihood does
-        not see (its verdict is recomputed from the widened interval)."""
+        not see (its verdict is recomputed from the widened interval). ``closed``: whether
+        the data close each side of ``[lower, upper]``; a side that moves out takes its
+        flag (an end on a search bound stays open)."""
         iv = self.intervals[name]
-        iv.lower, iv.upper = min(iv.lower, lower), max(iv.upper, upper)
+        if lower < iv.lower:
+            iv.lower, iv.closed_lower = lower, closed[0]
+        if upper > iv.upper:
+            iv.upper, iv.closed_upper = upper, closed[1]
+        if getattr(self, "short_calibration_days", None):
+            # too few calibration days: nothing is called identified, wider or not
+            self.verdicts[name] = self.verdicts[name].rstrip(".") + f"; {why}."
+            return
         self.verdicts[name] = _verdict(iv, None)[:-1] + f"; {why}."
 
     def __str__(self):
