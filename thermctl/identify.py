@@ -796,8 +796,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
             _misfit_note(ida, opt, notes, chk.checked,
-                         ratio=chk.shared.inflation if per_edge and chk.shared is not None
-                         else None)
+                         ratio=None if chk.shared is None else chk.shared.inflation)
     if gb is not None:
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     else:
@@ -1112,21 +1111,19 @@ def _drop_unstable(spec, cal, opt, sel, stab, notes, pe: bool):
     out.per_edge = {k: v for k, v in sel.per_edge.items() if k not in dropped}
     if not kept:
         return out
+    from .selection import per_path_rbar, shared_start
     est = sel.estimator
-    init = {k: v for k, v in est.params_.items()
-            if not ConvectionParameters.is_rbar(k, per_edge=True)
-            or (pe and ConvectionParameters.edge_of(k) not in dropped)}
-    if not pe and sel.per_edge and "rbar_v" not in init:
-        init["rbar_v"] = float(np.exp(np.mean(np.log(list(sel.per_edge.values())))))
+    init = ({k: v for k, v in est.params_.items()
+             if not ConvectionParameters.is_rbar(k, per_edge=True)
+             or ConvectionParameters.edge_of(k) not in dropped} if pe
+            else shared_start(est.params_, sel.per_edge))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         out.estimator = LikelihoodEstimator(
             ThermalNetwork(spec, kept), opt.estimation.criterion, solar=opt.estimation.solar,
             per_edge=pe, **_mass_options(opt)).fit(cal, init=init)
     if pe:
-        # the model's own per-path values: the refit's, not the larger structure's
-        rb, _ = out.estimator.problem_.rbar_c(out.estimator.eta_)
-        out.per_edge = {e.name: float(r) for e, r in zip(out.estimator.problem_.edges, rb)}
+        out.per_edge = per_path_rbar(out.estimator)   # the refit's, not the larger structure's
     return out
 
 
@@ -1632,13 +1629,12 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
                                 "every one does, none removed") + ".")
     if auto and chk.edges:
         notes.append(_per_path_note(pe_values, shown, lim))
-        if gone and opt.estimation.intervals != "none":
+        if gone:
             # the per-path intervals take this in; with no intervals it is not needed
-            shared = _shared_interval(spec, cal, opt, chk)
-        elif gone:
-            shared = None
+            shared = (_shared_interval(spec, cal, opt, chk)
+                      if opt.estimation.intervals != "none" else None)
     return _Checked(out, (gb, wald) if not gone and out.estimator is gb else None, True,
-                    per_edge, shared if auto else None)
+                    per_edge, shared)
 
 
 def _shared_interval(spec, cal, opt, chk):
@@ -1646,10 +1642,8 @@ def _shared_interval(spec, cal, opt, chk):
     :class:`SelectionResult` whose estimator is its per-path fit, the start); None, with a
     log line, if the fit or the Hessian fails."""
     from .estimate.likelihood import LikelihoodEstimator, wald_intervals
-    est = chk.estimator
-    init = {k: v for k, v in est.params_.items()
-            if not ConvectionParameters.is_rbar(k, per_edge=True)}
-    init["rbar_v"] = float(np.exp(np.mean(np.log(list(chk.per_edge.values())))))
+    from .selection import shared_start
+    init = shared_start(chk.estimator.params_, chk.per_edge)
     fit = LikelihoodEstimator(ThermalNetwork(spec, chk.edges), opt.estimation.criterion,
                               solar=opt.estimation.solar, **_mass_options(opt))
     try:

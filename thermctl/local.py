@@ -454,7 +454,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     -------
     LocalResult
     """
-    from .selection import select_air_paths
+    from .selection import per_path_rbar, select_air_paths
 
     t0, c0 = time.perf_counter(), time.process_time()
     sub = problem.data(frame)
@@ -497,8 +497,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
         n_fits += refit
         ua = est.problem_.ua_factors(est.eta_)
         if kept:
-            rbs, _ = est.problem_.rbar_c(est.eta_)
-            rb = {e.name: float(r) for e, r in zip(est.problem_.edges, rbs)}
+            rb = per_path_rbar(est)
     tau0 = float(est.tau0_) if kept else float("nan")
     return LocalResult(problem.zone, kept, evidence, rb, tau0, n_states, int(est.n_obs_),
                        n_fits, time.perf_counter() - t0, time.process_time() - c0,

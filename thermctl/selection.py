@@ -22,7 +22,8 @@ from .estimate.likelihood.scoring import CRITERIA, LikelihoodScorer
 from .network import ThermalNetwork
 from .structure.search import _cand, as_candidates, candidate_pairs, search_edges
 
-__all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "judge_air_paths", "CRITERIA"]
+__all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "judge_air_paths", "CRITERIA",
+           "per_path_rbar", "shared_start"]
 
 
 @dataclass
@@ -97,6 +98,22 @@ def sin_candidates(spec, data, level: float = 0.05, allow_parallel: bool = True)
                                   allow_parallel=allow_parallel).fit(frame, net)
         out |= {tuple(sorted((e.a, e.b))) for e in sid.edges_}
     return [_cand(spec, p) for p in sorted(out)]
+
+
+def per_path_rbar(est) -> dict:
+    """Edge name → R̄_v of a fit with one R̄_v per convection edge [K/(W m)]."""
+    rb, _ = est.problem_.rbar_c(est.eta_)
+    return {e.name: float(r) for e, r in zip(est.problem_.edges, rb)}
+
+
+def shared_start(params: dict, per_edge: dict) -> dict:
+    """Start values of a fit with one shared R̄_v from a fit's ``params``: every parameter
+    but the per-path R̄_v, and, unless the fit had a shared one, the geometric mean of the
+    per-path values ``per_edge`` (none without them)."""
+    init = {k: v for k, v in params.items() if not ConvectionParameters.is_rbar(k, per_edge=True)}
+    if per_edge:
+        init.setdefault("rbar_v", float(np.exp(np.mean(np.log(list(per_edge.values()))))))
+    return init
 
 
 def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
@@ -208,10 +225,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                        margin=margin, progress=progress, workers=workers, swaps=swaps,
                        known=known)
     est, cur = res.fitted, res.edges
-    per_edge = {}
-    if cur:
-        rb, _ = est.problem_.rbar_c(est.eta_)
-        per_edge = {e.name: float(r) for e, r in zip(est.problem_.edges, rb)}
+    per_edge = per_path_rbar(est) if cur else {}
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])
     final_kw = dict(estimator_kwargs)
     final_kw.pop("per_edge", None)
@@ -226,10 +240,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                                     max_iter=max_iter, **final_kw)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
-            final.fit(data, init={k: v for k, v in est.params_.items()
-                                  if not ConvectionParameters.is_rbar(k, per_edge=True)}
-                      | ({"rbar_v": float(np.exp(np.mean(np.log(list(per_edge.values())))))}
-                         if per_edge else {}))
+            final.fit(data, init=shared_start(est.params_, per_edge))
         scorer.count_fit()                  # counted and shown like the search's fits
     return SelectionResult([x.pair + (x.d,) for x in cur], res.candidates, res.path, res.reasons,
                            criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits,
