@@ -774,12 +774,13 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             stab = stability_selection(spec, cal, resamples=opt.selection.stability,
                                        seed=opt.selection.stability_seed,
                                        workers=opt.split.workers, progress=progress, **sel_kw)
-            kept = sel.edges
             sel = _drop_unstable(spec, cal, opt, sel, stab, notes, per_edge)
-            if (chk.shared is not None and sel.edges != kept and sel.edges
-                    and opt.estimation.intervals != "none"):
-                # the shared interval the per-path ones take in: of the structure kept
-                chk.shared = _shared_interval(spec, cal, opt, sel)
+        shared = chk.shared
+        if shared is not None and _pairs(sel.edges) != _pairs(chk.shared_edges):
+            # the check or the stability drop removed paths: the per-path intervals take in
+            # the shared R̄_v of the structure kept (one fit; none without intervals)
+            shared = (_shared_interval(spec, cal, opt, sel)
+                      if sel.edges and opt.estimation.intervals != "none" else None)
         net = ThermalNetwork(spec, sel.edges)
         _lost_data_note(sel.reasons.items(), {air_path_name(a, b) for a, b, _ in sel.edges},
                         notes)
@@ -792,11 +793,11 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             if not per_edge:                    # a per-path model holds no compromise
                 _shared_rbar_check(ida, sel.per_edge, notes)
             else:
-                _per_path_widen(ida, chk.shared, notes)
+                _per_path_widen(ida, shared, notes)
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
             _misfit_note(ida, opt, notes, chk.checked,
-                         ratio=None if chk.shared is None else chk.shared.inflation)
+                         ratio=None if shared is None else shared.inflation)
     if gb is not None:
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     else:
@@ -1502,13 +1503,15 @@ class _Checked:
     of the fit they were computed on (``(estimator, (intervals, weak))``, None if not
     computed, for the intervals to reuse); whether the check ran; whether the model carries
     one R̄_v per path (``estimation.per_edge`` resolved); and, when ``auto`` chose per path,
-    the robust Wald interval of one shared R̄_v on the same structure (else None)."""
+    the robust Wald interval of one shared R̄_v, of the selection before the check (else
+    None)."""
 
     sel: object
     wald: tuple | None = None
     checked: bool = False
     per_edge: bool = False
     shared: object = None
+    shared_edges: list = field(default_factory=list)    # the structure ``shared`` is of
 
 
 def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
@@ -1568,7 +1571,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         # --predict-t: the selection asked the prediction test already; only R̄_v is decided
         out = _per_path_model(sel, trials, shown, lim, notes)
         per = out.estimator is not gb
-        return _Checked(out, per_edge=per, shared=shared if per else None)
+        return _Checked(out, None, False, per, shared if per else None, list(sel.edges))
     from .selection import select_air_paths
     from .structure.search import SelectionStep
 
@@ -1601,7 +1604,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         if auto:
             out = _per_path_model(sel, trials, shown, lim, notes)
             per = out.estimator is not gb
-            return _Checked(out, per_edge=per, shared=shared if per else None)
+            return _Checked(out, None, False, per, shared if per else None, list(sel.edges))
         return _Checked(sel, (gb, wald), per_edge=fixed)
     kept = {air_path_name(a, b) for a, b, _ in chk.edges}
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
@@ -1629,12 +1632,13 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
                                 "every one does, none removed") + ".")
     if auto and chk.edges:
         notes.append(_per_path_note(pe_values, shown, lim))
-        if gone:
-            # the per-path intervals take this in; with no intervals it is not needed
-            shared = (_shared_interval(spec, cal, opt, chk)
-                      if opt.estimation.intervals != "none" else None)
     return _Checked(out, (gb, wald) if not gone and out.estimator is gb else None, True,
-                    per_edge, shared)
+                    per_edge, shared, list(sel.edges))
+
+
+def _pairs(edges) -> set:
+    """The air paths of ``(a, b, d)`` edges, as unordered pairs."""
+    return {frozenset((a, b)) for a, b, _ in edges}
 
 
 def _shared_interval(spec, cal, opt, chk):
