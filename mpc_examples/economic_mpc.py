@@ -200,7 +200,9 @@ class EconomicMPC(RecedingHorizonMPC):
         each step's length, the band is checked at the step ends only.
     rti_iter : int, optional
         Real-time iteration: after the first (cold, converged) solve, take this many
-        iterations from the shifted previous primal-dual solution instead of converging;
+        iterations (``sqp``: at most this many; it stops at its fixed point, a step below
+        :attr:`_SQPRealTimeIteration.STEP_TOL`) from the shifted previous primal-dual
+        solution instead of converging;
         what is left of the optimization is carried to the next step. None (default):
         converge every step. May be changed between solves (the RTI solver is built on
         first use).
@@ -519,11 +521,11 @@ class EconomicMPC(RecedingHorizonMPC):
         r = st = None
         x_shift = None if prev is None else np.clip(self._wb.shift(prev["x"]), lbx, ubx)
         if sqp:
-            w, lam_x, lam_g, f, ok, msg = self._sqp.solve(x_shift, P, lbx, ubx, self._lbg,
-                                                          self._ubg, self.rti_iter)
+            w, lam_x, lam_g, f, ok, msg, n = self._sqp.solve(x_shift, P, lbx, ubx, self._lbg,
+                                                             self._ubg, self.rti_iter)
             if ok:
                 r = {"x": w, "lam_x": lam_x, "lam_g": lam_g, "f": f}
-                st = {"return_status": msg, "iter_count": self.rti_iter, "success": True}
+                st = {"return_status": msg, "iter_count": n, "success": True}
             else:
                 log.info("economic MPC: %s, solving cold", msg)
         elif warm and prev is not None:
@@ -604,11 +606,20 @@ class _SQPRealTimeIteration:
                            {"h": H.sparsity(), "a": Jg.sparsity()}, opts)
         self.qp_solver = qp_solver
 
+    #: Largest step (any variable, in its own unit: kg/s, K, -) at which the iteration has
+    #: reached its fixed point and stops [-]. Near it the QP's solution is a zero step, on
+    #: which PIQP can stall: measured at 06:30 of the warm-up (tests/test_mpc_rti.py) the
+    #: steps shrink ~25× per iteration (1.8, 0.079, 3.0e-3, 1.1e-4, 4.3e-6), and with two
+    #: BLAS threads the sixth QP (a step of 1.6e-7) ended at PIQP's iteration limit, which
+    #: threw the whole step to a cold IPOPT solve (16 iterations).
+    STEP_TOL = 1e-5
+
     def solve(self, w, P, lbx, ubx, lbg, ubg, iterations: int):
-        """``iterations`` SQP steps from ``w``; returns (w, lam_x, lam_g, f, success, message)."""
+        """At most ``iterations`` SQP steps from ``w``, fewer when a step is below
+        :attr:`STEP_TOL`; returns (w, lam_x, lam_g, f, success, message, steps)."""
         w = np.asarray(w, float).copy()
         lam_x = lam_g = None
-        ok, msg = True, "SQP_RTI"
+        ok, msg, n = True, "SQP_RTI", 0
         for _ in range(iterations):
             grad, gval, Jg, H = self.lin(w, P)
             gval = np.asarray(gval).ravel()
@@ -621,7 +632,10 @@ class _SQPRealTimeIteration:
                 break
             w = np.clip(w + dw, lbx, ubx)   # clip: the QP's bounds hold to its tolerance only
             lam_x, lam_g = np.asarray(r["lam_x"]).ravel(), np.asarray(r["lam_a"]).ravel()
-        return w, lam_x, lam_g, float(self.f(w, P)), ok, msg
+            n += 1
+            if np.max(np.abs(dw), initial=0.0) < self.STEP_TOL:
+                break
+        return w, lam_x, lam_g, float(self.f(w, P)), ok, msg, n
 
 
 class _IterationLimit(ca.Callback):
