@@ -65,6 +65,9 @@ def test_the_check_starts_from_the_selection_and_keeps_only_edges_that_predict(f
     ratio = float(re.search(r"variance ratio ([\d.]+)", steps[0].note).group(1))
     assert ratio > 4.0
     assert set(steps[0].edges) == _edges(plain)           # it starts where BIC stopped
+    # the ratio says which structure it is of (a later note may quote the kept one's)
+    n = len(_edges(plain))
+    assert f"one shared R̄_v on the {n} selected air paths" in steps[0].note
     assert _edges(checked) <= _edges(plain)
     note = next(n for n in checked.notes if n.startswith("misfit check"))
     gone = _edges(plain) - _edges(checked)

@@ -797,7 +797,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
             _misfit_note(ida, opt, notes, chk.checked,
-                         ratio=None if shared is None else shared.inflation)
+                         ratio=None if shared is None else shared.inflation,
+                         paths=len(sel.edges) if shared is not None else None)
     if gb is not None:
         rbar_v, c_v = gb.rbar_v_, gb.c_v_
     else:
@@ -1582,7 +1583,10 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         if progress:
             progress(f"misfit check fits ({len(sel.edges)} air paths)", n, None)
 
-    head = (f"misfit check: R̄_v variance ratio {shown} (sandwich/Hessian), above "
+    n = len(sel.edges)
+    of = (f"the largest of the {n} selected air paths'" if fixed else
+          f"one shared R̄_v on the {n} selected air path{'s' if n > 1 else ''}")
+    head = (f"misfit check: R̄_v variance ratio {shown} (sandwich/Hessian, {of}), above "
             f"{lim:g}: every kept air path must also improve the 6-h prediction day after day "
             f"(t >= {MISFIT_PREDICT_T:g})")
     say(head.split(": ", 1)[1])
@@ -1708,19 +1712,23 @@ def _per_path_model(sel, trials, shown, lim, notes):
     return replace(sel, estimator=got[0])
 
 
-def _misfit_note(ida, opt, notes, checked: bool = False, ratio: float | None = None):
+def _misfit_note(ida, opt, notes, checked: bool = False, ratio: float | None = None,
+                 paths: int | None = None):
     """Say so when the innovations are far from white: BIC then overstates the evidence.
-    ``ratio``: the variance ratio of one shared R̄_v on the model's structure (a per-path
-    model has one ratio per path; the note gives the shared value's, as the misfit check
-    does, not the first path's)."""
+    ``ratio``: the variance ratio of one shared R̄_v on the model's structure of ``paths``
+    air paths (a per-path model has one ratio per path; the note gives the shared value's,
+    as the misfit check does, not the first path's). The check's own note quotes the
+    ratio of the structure before it, so each says which structure its number is of."""
     if ratio is None:
         iv = None if ida is None else next(
             (v for k, v in ida.intervals.items() if k.startswith("rbar_v")), None)
         ratio = None if iv is None else iv.inflation
     if ratio is None or ratio <= MISFIT_RATIO:
         return
+    on = ("" if paths is None else
+          f" of one shared value on the {paths} kept air path{'s' if paths > 1 else ''}")
     head = (f"the model's one-step innovations are far from white (sandwich/Hessian variance "
-            f"ratio {ratio:.0f} for R̄_v): ")
+            f"ratio {ratio:.0f} for R̄_v{on}): ")
     if opt.selection.criterion == "holdout":
         notes.append(
             head + "its intervals are widened by that much; the air paths were kept for what "
