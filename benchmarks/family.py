@@ -51,6 +51,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import gmean
 
 from thermctl.data import read_measurements
 from thermctl.identify import EstimationOptions, IdentifyOptions, SelectionOptions, identify
@@ -143,8 +144,8 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
     row["recall_hits"] = len(found & visible)
     row["false"] = len(found - visible)
     rb = np.atleast_1d(np.asarray(model.rbar_v, float)) if found else np.array([])
-    r_true = float(np.exp(np.mean(np.log(np.atleast_1d(tb.truth.rbar_v)))))
-    row["rbar_v"] = float(np.exp(np.mean(np.log(rb)))) if rb.size else None
+    r_true = float(gmean(np.atleast_1d(tb.truth.rbar_v)))
+    row["rbar_v"] = float(gmean(rb)) if rb.size else None
     row["rbar_err"] = abs(row["rbar_v"] / r_true - 1.0) if rb.size else None
     iv = getattr(ident.intervals, "intervals", {}) or {}
     if "rbar_v" in iv:

@@ -79,6 +79,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import gmean
 
 from thermctl.estimate import EstimationData
 from thermctl.estimate.likelihood import LikelihoodEstimator, identifiability
@@ -186,7 +187,7 @@ class Result:
 
 # ---------------------------------------------------------------------------- measures
 def _rbar(x):
-    return float(np.exp(np.mean(np.log(np.atleast_1d(x)))))
+    return float(gmean(np.atleast_1d(x)))
 
 
 def _step_error(model, truth_model, ms_min):

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.stats import gmean
 
 from thermctl.data import read_measurements
 from thermctl.identify import identify
@@ -158,7 +159,7 @@ def _run(path, spec, name, **read_kw):
     rb = np.atleast_1d(np.asarray(model.rbar_v, float)) if edges else np.array([])
     return {
         "name": name, "quality": q, "edges": edges,
-        "rbar_v": float(np.exp(np.mean(np.log(rb)))) if rb.size else float("nan"),
+        "rbar_v": float(gmean(rb)) if rb.size else float("nan"),
         "read_s": c1 - c0, "identify_s": c2 - c1, "notes": list(ident.notes),
         "cal": (ident.calibration.start, ident.calibration.end),
     }

@@ -50,6 +50,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import gmean
 
 from ._parallel import run_tasks
 from .errors import BoundWarning, ConvergenceWarning, DataError, EstimationError
@@ -950,7 +951,7 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
             ev = [v for v in e["ev"].values() if np.isfinite(v)]
             kept = bool(ev) and sum(ev) < -margin
         rbs = list(e["rb"].values())
-        rb = float(np.exp(np.mean(np.log(rbs)))) if kept and rbs else float("nan")
+        rb = float(gmean(rbs)) if kept and rbs else float("nan")
         tested = e.get("tested", {})
         desc = ", ".join(f"{z}: {'kept' if votes[z] else 'out'} ({e['ev'][z]:+.1f})"
                          + (f" when tested alone ({tested[z]})" if z in tested else "")

@@ -14,6 +14,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import gmean
 
 from .errors import BoundWarning, EstimationError
 from .model import ConvectionParameters
@@ -112,7 +113,7 @@ def shared_start(params: dict, per_edge: dict) -> dict:
     per-path values ``per_edge`` (none without them)."""
     init = {k: v for k, v in params.items() if not ConvectionParameters.is_rbar(k, per_edge=True)}
     if per_edge:
-        init.setdefault("rbar_v", float(np.exp(np.mean(np.log(list(per_edge.values()))))))
+        init.setdefault("rbar_v", float(gmean(list(per_edge.values()))))
     return init
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import gmean
 
 from .errors import ModelError
 from .model import ConvectionParameters, ThermalModel, zoh
@@ -168,7 +169,7 @@ def _physical_fix(model: ThermalModel) -> tuple[dict, bool]:
     cv = np.atleast_1d(np.asarray(model.c_v, dtype=float)) * np.ones(len(edges))
     # τ0 is shared in the grey-box model; the geometric mean keeps its scale (C_v hardly
     # matters at data steps of minutes: the edges' own time constants are seconds)
-    tau0 = float(np.exp(np.mean(np.log(rb * cv))))
+    tau0 = float(gmean(rb * cv))
     if np.allclose(rb, rb[0], rtol=1e-9):
         return {"rbar_v": float(rb[0]), "tau0": tau0}, False
     fix = {ConvectionParameters.key(e.name): float(r) for e, r in zip(edges, rb)}

@@ -45,6 +45,7 @@ import math
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.stats import gmean
 
 from ..._parallel import thread_map
 from ...errors import DataError, EstimationError
@@ -332,10 +333,10 @@ class LikelihoodProblem:
                     self.i_rbar.append(lay.add(Param(ConvectionParameters.key(e.name), "rbar_v", True,
                                                      float(np.clip(r, lo_r, hi_r)), lo_r, hi_r)))
             else:
-                r0 = float(np.exp(np.mean(np.log(rb))))
+                r0 = float(gmean(rb))
                 self.i_rbar = [lay.add(Param("rbar_v", "rbar_v", True, float(np.clip(r0, lo_r, hi_r)),
                                              lo_r, hi_r))] * m
-            t0 = math.sqrt(lo_t * hi_t) if c_v is None else float(np.exp(np.mean(np.log(rb)))) * c_v
+            t0 = math.sqrt(lo_t * hi_t) if c_v is None else float(gmean(rb)) * c_v
             self.i_tau = lay.add(Param("tau0", "tau0", True, float(np.clip(t0, lo_t, hi_t)), lo_t, hi_t))
         shared = opt.noise == "shared"
         mz = [self.zones[i] for i in self.meas]

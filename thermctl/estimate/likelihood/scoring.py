@@ -14,6 +14,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
+from scipy.stats import gmean
 
 from ..._blas import ignore_warnings, single_thread_blas
 from ..._parallel import thread_map
@@ -452,4 +453,4 @@ def _key(c) -> str:
 
 def _start_rbar(params):
     vals = [v for k, v in params.items() if k.startswith("rbar_v")]
-    return float(np.exp(np.mean(np.log(vals)))) if vals else RBAR_START
+    return float(gmean(vals)) if vals else RBAR_START

@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2, norm
+from scipy.stats import chi2, gmean, norm
 
 from ..._blas import ignore_warnings, single_thread_blas
 from ..._parallel import thread_map
@@ -449,7 +449,7 @@ def _verdict(iv: ParameterInterval, pb) -> str:
 def _cv_verdict(tau: ParameterInterval, est) -> str:
     # one R̄_v per path: C_v = τ0/R̄_v per path too; the interval on their geometric mean
     per = np.atleast_1d(est.rbar_v_) if np.ndim(est.rbar_v_) else None
-    rb = est.rbar_v_ if per is None else float(np.exp(np.mean(np.log(per))))
+    rb = est.rbar_v_ if per is None else float(gmean(per))
     lo, hi = tau.lower / rb, tau.upper / rb
     val = (_fmt(tau.value / rb) if per is None or per.size < 2 else
            ", ".join(_fmt(tau.value / r) for r in per) + " (one per path)")
