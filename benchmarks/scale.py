@@ -364,13 +364,15 @@ def _git_head() -> str:
     return "?"
 
 
-def buildings(zones, pugh: bool):
+def buildings(zones, pugh: bool, control_minutes: float | None = None):
     """(label, generate() arguments, zones asked) in run order."""
     out = []
+    ctrl = {} if control_minutes is None else {"control_minutes": control_minutes}
+    tag = "" if control_minutes is None else f" ctrl {control_minutes:g}"
     for z in zones:
-        out.append((f"corridor {z}", dict(building="corridor", zones=z), z))
+        out.append((f"corridor {z}{tag}", dict(building="corridor", zones=z, **ctrl), z))
         if z == 7 and pugh:
-            out.append(("pugh-hall 7", dict(building="pugh-hall"), 7))
+            out.append((f"pugh-hall 7{tag}", dict(building="pugh-hall", **ctrl), 7))
     return out
 
 
@@ -437,6 +439,10 @@ def main(argv=None) -> Result:
     ap.add_argument("--no-pugh", action="store_true", help="no pugh-hall row with 7 zones")
     ap.add_argument("--local-candidates", choices=("all", "sin"), default=LOCAL_CANDIDATES,
                     help="what each local search starts from (as identify --local-candidates)")
+    ap.add_argument("--control-minutes", type=float, default=None, metavar="M",
+                    help="the testbed's control step [min] (default 1: the VAV boxes act "
+                         "between the 5-min samples; 5: at the data step, the logged inputs "
+                         "are what the plant got; labels get ' ctrl M')")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
     args = ap.parse_args(argv)
     globals()["LOCAL_CANDIDATES"] = args.local_candidates
@@ -468,7 +474,8 @@ def main(argv=None) -> Result:
     try:
         for group, label, kw, z, seed in [(lb, lb + (f" s{sd}" if len(seeds) > 1 else ""), kw,
                                            z, sd)
-                                          for lb, kw, z in buildings(args.zones, not args.no_pugh)
+                                          for lb, kw, z in buildings(args.zones, not args.no_pugh,
+                                                                     args.control_minutes)
                                           for sd in seeds]:
             t = time.perf_counter()
             say(f"{label}: generating {args.days:g} days")
