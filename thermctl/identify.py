@@ -1760,10 +1760,9 @@ def _greybox_meta(gb, ida) -> dict:
     if ida is not None:
         out["intervals"] = {k: {"value": iv.value, "lower": iv.lower, "upper": iv.upper,
                                 "level": iv.level, "method": iv.method, "unit": iv.unit,
-                                "identifiable": iv.identifiable and not getattr(
-                                    ida, "short_calibration_days", None)
-                                and not (k == "rbar_v" and getattr(ida, "paths_disagree",
-                                                                   None))}
+                                "identifiable": iv.identifiable
+                                and not ida.short_calibration_days
+                                and not (k == "rbar_v" and ida.paths_disagree)}
                             for k, iv in ida.intervals.items()
                             if ConvectionParameters.kind_of(k) in ("rbar_v", "tau0")}
         out["verdicts"] = dict(ida.verdicts)

@@ -101,6 +101,13 @@ class IdentifiabilityReport:
     verdicts : dict
         Name → one sentence.
     level : float
+    short_calibration_days : float or None
+        Set when the calibration was too short to call anything identified [d]; a widened
+        interval keeps that verdict.
+    paths_disagree : tuple or None
+        Set when the per-path R̄_v of the selected structure disagree
+        (:func:`thermctl.identify.paths_disagree`): the shared R̄_v is not identified as one
+        value.
     """
 
     intervals: dict
@@ -108,6 +115,8 @@ class IdentifiabilityReport:
     weak_directions: list
     verdicts: dict
     level: float
+    short_calibration_days: float | None = None
+    paths_disagree: tuple | None = None
 
     def widen(self, name: str, lower: float, upper: float, why: str,
               closed: tuple[bool, bool] = (True, True)) -> None:
@@ -121,7 +130,7 @@ class IdentifiabilityReport:
             iv.lower, iv.closed_lower = lower, closed[0]
         if upper > iv.upper:
             iv.upper, iv.closed_upper = upper, closed[1]
-        if getattr(self, "short_calibration_days", None):
+        if self.short_calibration_days:
             # too few calibration days: nothing is called identified, wider or not
             self.verdicts[name] = self.verdicts[name].rstrip(".") + f"; {why}."
             return
