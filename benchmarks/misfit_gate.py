@@ -40,7 +40,7 @@ def main(argv=None) -> dict:
         gb = identify(meas, opt).greybox
     prob, eta = gb.problem_, gb.eta_
     lay = prob.layout
-    at_bound = {b.split(" ")[0] for b in lay.at_bounds(eta)}
+    at_bound = lay.at_bound_names(eta)
     use = lay.free() & np.array([p.name not in at_bound for p in lay.params])
     idx = np.flatnonzero(use)
     H = hessian_fd(prob, eta, use, threads=2)

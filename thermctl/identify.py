@@ -1553,7 +1553,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         gb.problem_.release_buffers()       # one set per thread; the intervals make their own
     # the shared R̄_v, or the path with the largest ratio (--per-edge) among those not on a
     # bound (left out of the Hessian's inversion: no ratio)
-    at_bound = {b.split(" ")[0] for b in gb.problem_.layout.at_bounds(gb.eta_)}
+    at_bound = gb.problem_.layout.at_bound_names(gb.eta_)
     ivs = [v for k, v in wald[0].items() if ConvectionParameters.is_rbar(k) and k not in at_bound]
     iv = max(ivs, key=lambda v: v.inflation) if ivs else None
     if iv is None:

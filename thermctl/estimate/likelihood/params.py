@@ -162,17 +162,25 @@ class ParamLayout:
             out.append(p)
         return ParamLayout(out)
 
-    def at_bounds(self, eta, rtol: float = 1e-3) -> list[str]:
-        """Free parameters within ``rtol`` (relative in eta-range) of a bound."""
+    def _on_bounds(self, eta, rtol: float):
+        """``(param, "lower" | "upper")`` of every free parameter within ``rtol`` (relative
+        in eta-range) of a bound."""
         lo, hi = self.bounds()
         eta = np.asarray(eta, dtype=float)
-        out = []
         for i, p in enumerate(self.params):
             if p.fixed:
                 continue
             span = max(hi[i] - lo[i], 1e-12)
             if eta[i] - lo[i] <= rtol * span:
-                out.append(f"{p.name} at its lower bound {p.lower:g} [{p.unit}]")
+                yield p, "lower"
             elif hi[i] - eta[i] <= rtol * span:
-                out.append(f"{p.name} at its upper bound {p.upper:g} [{p.unit}]")
-        return out
+                yield p, "upper"
+
+    def at_bounds(self, eta, rtol: float = 1e-3) -> list[str]:
+        """Free parameters within ``rtol`` (relative in eta-range) of a bound, in words."""
+        return [f"{p.name} at its {side} bound {p.lower if side == 'lower' else p.upper:g} "
+                f"[{p.unit}]" for p, side in self._on_bounds(eta, rtol)]
+
+    def at_bound_names(self, eta, rtol: float = 1e-3) -> set[str]:
+        """Names of the free parameters :meth:`at_bounds` lists."""
+        return {p.name for p, _ in self._on_bounds(eta, rtol)}

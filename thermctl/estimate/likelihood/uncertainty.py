@@ -205,7 +205,7 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
     lay = problem.layout
     eta = np.asarray(eta, dtype=float)
     free = lay.free() if free is None else np.asarray(free, bool) & lay.free()
-    at_bound = {b.split(" ")[0] for b in lay.at_bounds(eta)}
+    at_bound = lay.at_bound_names(eta)
     use = free & np.array([p.name not in at_bound for p in lay.params])
     idx = np.flatnonzero(use)
     if H is None:
