@@ -337,6 +337,40 @@ def test_wald_intervals_and_c_v_verdict(sim5, net5):
     assert np.all(np.isfinite(H)) and H[0, 0] > 0
 
 
+def test_wald_intervals_drop_only_the_parameter_the_data_do_not_fix(sim5, net5):
+    # one flat direction (a noise level fitted to about 0 gives one) made the whole inverse
+    # Hessian NaN: every interval became the search range and every variance ratio 1
+    data, opts = sim5
+    est = LikelihoodEstimator(net5, options=opts).fit(data)
+    pb, eta = est.problem_, est.eta_
+    lay = pb.layout
+    use = lay.free() & np.array([p.name not in lay.at_bound_names(eta) for p in lay.params])
+    idx = np.flatnonzero(use)
+    H = hessian_fd(pb, eta, use)
+    j = int(np.flatnonzero([lay.params[i].name == "sigma_v" for i in idx])[0])
+    for flat in (0.0, -1e-3 * H[j, j]):             # flat, and slightly negative curvature
+        Hf = H.copy()
+        Hf[j, :] = Hf[:, j] = 0.0
+        Hf[j, j] = flat
+        got, _ = wald_intervals(pb, eta, 0.9, robust=False, H=Hf)
+        sv = got["sigma_v"]
+        assert not sv.identifiable and (sv.lower, sv.upper) == (lay.params[idx[j]].lower,
+                                                                lay.params[idx[j]].upper)
+        # the others: as if sigma_v were held fixed (its row and column left out)
+        free = use.copy()
+        free[idx[j]] = False
+        ref, _ = wald_intervals(pb, eta, 0.9, robust=False, free=free,
+                                H=np.delete(np.delete(H, j, 0), j, 1))
+        iv, rv = got["rbar_v"], ref["rbar_v"]
+        assert iv.identifiable and est.rbar_v_ * 0.5 < iv.lower < est.rbar_v_ < iv.upper
+        assert (iv.lower, iv.upper) == pytest.approx((rv.lower, rv.upper), rel=1e-9)
+    # and with the sandwich: R̄_v's ratio is a number, not the 1.0 a NaN inverse gave
+    rob, _ = wald_intervals(pb, eta, 0.9, robust=True, H=Hf)
+    full, _ = wald_intervals(pb, eta, 0.9, robust=True, H=H)
+    assert rob["rbar_v"].identifiable
+    assert rob["rbar_v"].inflation == pytest.approx(full["rbar_v"].inflation, rel=0.5)
+
+
 def test_profile_interval_agrees_with_wald(sim5, net5):
     from thermctl.estimate.likelihood.uncertainty import profile_likelihood
     data, opts = sim5

@@ -222,22 +222,34 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
             combo = " ".join(f"{comp[t]:+.2f}·{_coord(lay.params[idx[t]])}" for t in top
                              if abs(comp[t]) > 0.1)
             weak.append((float(w[k] / max(problem.n_obs, 1)), combo))
-        wc = np.where(w > 1e-12 * scale, w, np.nan)
-        Hinv = (V / wc) @ V.T
-        var = np.diag(Hinv).copy()
+        # a direction the data do not fix (curvature ≤ 1e-12 of the largest, or negative:
+        # a noise variance fitted to about 0) made the whole inverse NaN, and with it every
+        # parameter's interval and variance ratio (measured on the twin house N2 with a noise
+        # level per zone: all 23 intervals the search range, every ratio read as 1): such
+        # parameters are dropped one by one and the others' variances are conditional on them
+        keep = _determined(H)
+        var = np.full(len(idx), np.nan)
         infl = np.ones(len(idx))
-        if robust:
-            G = problem.block_scores(eta, block, threads=threads)[:, idx]
-            nb = G.shape[0]
-            if nb >= 3:
-                Gc = G - G.mean(axis=0)
-                J = Gc.T @ Gc * nb / (nb - 1)
-                vr = np.diag(np.nan_to_num(Hinv) @ J @ np.nan_to_num(Hinv))
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    infl = np.where(var > 0, np.maximum(vr / var, 1.0), 1.0)
-            else:
-                log.info("robust intervals need at least 3 blocks of %g h; using the Hessian",
-                         block / 3600)
+        if len(keep):
+            wk, Vk = np.linalg.eigh(H[np.ix_(keep, keep)])
+            Hinv = (Vk / wk) @ Vk.T
+            var[keep] = np.diag(Hinv)
+            if robust:
+                G = problem.block_scores(eta, block, threads=threads)[:, idx[keep]]
+                nb = G.shape[0]
+                if nb >= 3:
+                    Gc = G - G.mean(axis=0)
+                    J = Gc.T @ Gc * nb / (nb - 1)
+                    vr = np.diag(Hinv @ J @ Hinv)
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        infl[keep] = np.where(var[keep] > 0, np.maximum(vr / var[keep], 1.0), 1.0)
+                else:
+                    log.info("robust intervals need at least 3 blocks of %g h; using the "
+                             "Hessian", block / 3600)
+        if len(keep) < len(idx):
+            log.info("Wald intervals: %s not determined by the data (flat or negative "
+                     "curvature); the others' variances are conditional on them",
+                     ", ".join(lay.params[idx[j]].name for j in range(len(idx)) if j not in keep))
         se = np.sqrt(np.where(var > 0, var * infl, np.nan))
         for j, i in enumerate(idx):
             p = lay.params[i]
@@ -258,6 +270,19 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
                                         v if near_lo else p.upper, level, "wald", p.unit,
                                         False, False)
     return out, weak
+
+
+def _determined(H, tol: float = 1e-12) -> list:
+    """Indices of ``H`` whose sub-Hessian is positive definite (eigenvalues above ``tol``
+    of the largest): the parameter with the largest weight in the flattest direction is
+    dropped until none is at or below it."""
+    keep = list(range(H.shape[0]))
+    while keep:
+        w, V = np.linalg.eigh(H[np.ix_(keep, keep)])
+        if w.min() > tol * max(abs(w).max(), 1e-300):
+            break
+        keep.pop(int(np.argmax(np.abs(V[:, int(np.argmin(w))]))))
+    return keep
 
 
 def _coord(p):
