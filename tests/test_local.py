@@ -395,8 +395,9 @@ def test_local_problems_offer_no_air_path_through_a_slab():
 
 
 def test_whole_building_noise_options_are_said_to_skip_the_local_problems(tmp_path):
-    """``--noise zone`` and ``--common-gain`` shape whole-building fits; on the local path a
-    note says the local problems decided without them (no silent option)."""
+    """``--common-gain`` shapes whole-building fits; on the local path a note says the local
+    problems decided without it (no silent option). ``--noise`` is not said: a local
+    problem has one measured zone, so its noise is per zone whichever the option."""
     from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
                                    SplitOptions, identify)
     from thermctl.spec import load_spec
@@ -411,6 +412,7 @@ def test_whole_building_noise_options_are_said_to_skip_the_local_problems(tmp_pa
                                   estimation=EstimationOptions(intervals="none", **est),
                                   split=SplitOptions(scale="local", workers=1))
             notes[key] = identify(meas, opt).notes
-    said = [n for n in notes["both"] if "act on whole-building fits only" in n]
-    assert len(said) == 1 and "--noise zone and --common-gain 1" in said[0]
-    assert not any("act on whole-building fits only" in n for n in notes["plain"])
+    said = [n for n in notes["both"] if "on whole-building fits only" in n]
+    assert len(said) == 1 and said[0].startswith("--common-gain 1 acts on"), said
+    assert "--noise" not in said[0]
+    assert not any("on whole-building fits only" in n for n in notes["plain"])

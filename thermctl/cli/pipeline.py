@@ -116,8 +116,9 @@ def identify(
                                   "occupancy that changes by the hour: auto (kept when it "
                                   "improves BIC by more than --margin), on or off."),
     noise: str = typer.Option(_D.estimation.noise, "--noise", help="Kalman criteria, "
-                              "whole-building fits: heat, gain and sensor noise shared by "
-                              "the zones, or zone (one of each per zone)."),
+                              "whole-building fits: heat, gain and sensor noise per zone "
+                              "(zone; auto = zone with a Kalman criterion), or shared by the "
+                              "zones (the paper's model; shared)."),
     common_gain: int = typer.Option(_D.estimation.common_gain, "--common-gain", min=0,
                                     help="Kalman criteria, whole-building fits: this many "
                                     "common gains (a first-order disturbance every measured "
