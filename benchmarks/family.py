@@ -120,7 +120,8 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
     measured = set(tb.spec.measured_zones)
     true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
     visible = {p for p in true if set(p) <= measured}
-    row = dict(study=study, case=name, seed=seed, days=days, kwargs=_plain(kwargs),
+    row = dict(study=study, case=name, seed=seed, days=days, session=SESSION,
+               kwargs=_plain(kwargs),
                building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
     if estimation:
@@ -176,12 +177,27 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
+SESSION = 20
+"""Written into every row: the defaults changed with sessions (see ``_as_default``)."""
+
+
 def _as_default(row):
-    """A row run with ``--swaps`` alone (session 15, before swaps became the default) is a
-    run of today's default: its case name loses " [swaps]", so that it replaces the older
-    run of the same case in the defaults table."""
+    """A row's case name as it differs from today's defaults.
+
+    A row run with ``--swaps`` alone (session 15, before swaps became the default) is a
+    run of today's default: its case name loses " [swaps]". Before session 20 the default
+    noise was one σ of each for the building: such rows get " [noise shared]"; a row of
+    session 20 or later run with ``--noise zone`` is a default run and loses the label
+    (earlier ``--noise zone`` rows keep it: session 20 fixed the Wald intervals that the
+    misfit check's trigger reads, which were NaN there).
+    """
     if row.get("selection") == {"swaps": True} and not row.get("estimation"):
         row = dict(row, case=row["case"].replace(" [swaps]", ""))
+    noise = (row.get("estimation") or {}).get("noise")
+    if row.get("session", 0) < 20 and noise is None:
+        row = dict(row, case=row["case"] + " [noise shared]")
+    elif row.get("session", 0) >= 20 and noise == "zone":
+        row = dict(row, case=row["case"].replace(" [noise zone]", ""))
     return row
 
 
@@ -246,8 +262,9 @@ def main(argv=None):
                     help="identify's innovation distribution (student: case names get ' [t]')")
     ap.add_argument("--fast-gain", action="store_true",
                     help="identify with a fast gain per zone (case names get ' [fast]')")
-    ap.add_argument("--noise", choices=["shared", "zone"], default="shared",
-                    help="identify's --noise (zone: case names get ' [noise zone]')")
+    ap.add_argument("--noise", choices=["shared", "zone"], default=None,
+                    help="identify's --noise (case names get ' [noise NOISE]'; the default, "
+                         "per zone, since session 20)")
     ap.add_argument("--common-gain", type=int, default=0, metavar="N",
                     help="identify's --common-gain (case names get ' [common N]')")
     ap.add_argument("--selection", metavar="CANDIDATES:CRITERION",
@@ -280,7 +297,10 @@ def main(argv=None):
                "different pairs); the earlier default runs stay in family-runs.jsonl. Since "
                "session 17 the misfit check runs where R̄_v's variance ratio is above 4, and "
                "since session 18 the model then carries R̄_v per path (the 8 cases it "
-               "concerns were re-run; the others are unchanged by it). A per-path model's R̄v "
+               "concerns were re-run; the others are unchanged by it). Since session 20 the noise "
+               "is per zone (rows before it, with one σ of each for the building, are "
+               "labelled [noise shared]; session 20's --noise zone runs are the defaults). "
+               "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]
         for study in ("factors", "family", "original"):
@@ -313,7 +333,7 @@ def main(argv=None):
             name, est["innovations"] = name + " [t]", args.innovations
         if args.fast_gain:
             name, est["fast_gain"] = name + " [fast]", True
-        if args.noise != "shared":
+        if args.noise is not None:
             name, est["noise"] = name + f" [noise {args.noise}]", args.noise
         if args.per_edge:
             name, est["per_edge"] = name + " [per edge]", True
