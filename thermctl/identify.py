@@ -1650,14 +1650,14 @@ def _pairs(edges) -> set:
     return {frozenset((a, b)) for a, b, _ in edges}
 
 
-def _shared_interval(spec, cal, opt, chk):
-    """The robust Wald interval of one shared R̄_v fitted on the structure of ``chk`` (a
+def _shared_interval(spec, cal, opt, sel):
+    """The robust Wald interval of one shared R̄_v fitted on the structure of ``sel`` (a
     :class:`SelectionResult` whose estimator is its per-path fit, the start); None, with a
     log line, if the fit or the Hessian fails."""
     from .estimate.likelihood import LikelihoodEstimator, wald_intervals
     from .selection import shared_start
-    init = shared_start(chk.estimator.params_, chk.per_edge)
-    fit = LikelihoodEstimator(ThermalNetwork(spec, chk.edges), opt.estimation.criterion,
+    init = shared_start(sel.estimator.params_, sel.per_edge)
+    fit = LikelihoodEstimator(ThermalNetwork(spec, sel.edges), opt.estimation.criterion,
                               solar=opt.estimation.solar, **_mass_options(opt))
     try:
         with warnings.catch_warnings():
