@@ -265,7 +265,7 @@ class EstimationOptions:
         Per zone since session 20: rooms whose occupancy, heater, ventilation or control
         loop is busier than the others' otherwise leave the difference to air paths
         (measured in docs/identification.md, "A busy room, or a disturbance rooms share":
-        on the first testbed family, 14 days, recall 0.73 → 0.88 and false paths 0.67 →
+        on the first testbed family, 14 days, recall 0.73 → 0.83 and false paths 0.67 →
         0.22 per building; on the twin house N2 the same 3 doors and no coupling).
     common_gain : int
         Kalman criteria, whole-building fits: this many common gains, each a first-order
