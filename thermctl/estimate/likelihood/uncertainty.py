@@ -185,7 +185,10 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
                    block: float = 86400.0, threads: int = 1) -> tuple[dict, list]:
     """Wald intervals of every free parameter and the weak Hessian directions.
 
-    Parameters at a bound are left out of the inversion (treated as fixed).
+    Parameters at a bound are left out of the inversion (treated as fixed), and so are
+    parameters the data do not fix (a flat or negative-curvature direction of the
+    Hessian, e.g. a noise level fitted to about 0): their interval is the search range,
+    and the others' variances are conditional on them.
 
     With ``robust`` the variance is the sandwich ``H⁻¹ J H⁻¹``, ``J`` the covariance of
     the likelihood's gradient contributions of consecutive ``block``-long stretches of
