@@ -230,11 +230,10 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
         # parameter's interval and variance ratio (measured on the twin house N2 with a noise
         # level per zone: all 23 intervals the search range, every ratio read as 1): such
         # parameters are dropped one by one and the others' variances are conditional on them
-        keep = _determined(H)
+        keep, wk, Vk = _determined(H, w, V)
         var = np.full(len(idx), np.nan)
         infl = np.ones(len(idx))
         if len(keep):
-            wk, Vk = np.linalg.eigh(H[np.ix_(keep, keep)])
             Hinv = (Vk / wk) @ Vk.T
             var[keep] = np.diag(Hinv)
             if robust:
@@ -275,17 +274,18 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
     return out, weak
 
 
-def _determined(H, tol: float = 1e-12) -> list:
-    """Indices of ``H`` whose sub-Hessian is positive definite (eigenvalues above ``tol``
-    of the largest): the parameter with the largest weight in the flattest direction is
-    dropped until none is at or below it."""
+def _determined(H, w, V, tol: float = 1e-12):
+    """``(keep, w_k, V_k)``: the indices of ``H`` whose sub-Hessian is positive definite
+    (eigenvalues above ``tol`` of the largest) and that sub-Hessian's eigen-decomposition;
+    ``w, V`` are ``H``'s own. The parameter with the largest weight in the flattest
+    direction is dropped until none is at or below it."""
     keep = list(range(H.shape[0]))
     while keep:
-        w, V = np.linalg.eigh(H[np.ix_(keep, keep)])
         if w.min() > tol * max(abs(w).max(), 1e-300):
             break
         keep.pop(int(np.argmax(np.abs(V[:, int(np.argmin(w))]))))
-    return keep
+        w, V = np.linalg.eigh(H[np.ix_(keep, keep)])
+    return keep, w, V
 
 
 def _coord(p):
