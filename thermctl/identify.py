@@ -866,14 +866,12 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
     spec = meas.spec
     notes = []
     est = opt.estimation
-    # --noise is not among them: a local problem has one measured zone, so its noise is
-    # that zone's whichever the option
-    whole_only = [w for w, on in ((f"--common-gain {est.common_gain}", bool(est.common_gain)),)
-                  if on]
-    if whole_only:
-        notes.append(f"{' and '.join(whole_only)} {'act' if len(whole_only) > 1 else 'acts'} on "
-                     f"whole-building fits only (the refit, when there is one): the local "
-                     f"problems, one measured zone each, decide the air paths without")
+    # not said of --noise: a local problem has one measured zone, so its noise is that
+    # zone's whichever the option
+    if est.common_gain:
+        notes.append(f"--common-gain {est.common_gain} acts on whole-building fits only (the "
+                     f"refit, when there is one): the local problems, one measured zone each, "
+                     f"decide the air paths without")
     logger.info("%s", li.summary())
     stab = _local_stability(li, cal, opt, progress, client, notes) \
         if opt.selection.stability else None
