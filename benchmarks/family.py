@@ -177,7 +177,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 20
+SESSION = 21
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
 
 
@@ -300,6 +300,9 @@ def main(argv=None):
                "concerns were re-run; the others are unchanged by it). Since session 20 the noise "
                "is per zone (rows before it, with one σ of each for the building, are "
                "labelled [noise shared]; session 20's --noise zone runs are the defaults). "
+               "Since session 21 a swap may replace a kept edge whose own daily gain has t "
+               "below 2 on the criterion alone; the rows of the studies re-run then say "
+               "session 21 in family-runs.jsonl. "
                "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]

@@ -112,6 +112,37 @@ def test_a_swap_must_also_win_day_after_day(t, swapped):
         assert f"daily gain t {t:.1f}" in res.reasons[T.name]
 
 
+class SupportScorer(TableScorer):
+    """``consistent(small, big)``: the t of the edge ``big`` has and ``small`` lacks when they
+    are nested (an edge's own support), else the swap's t."""
+
+    def __init__(self, single, own_t, swap_t):
+        super().__init__(single)
+        self.own_t, self.swap_t = own_t, swap_t
+
+    def consistent(self, small, big):
+        extra = {c.name for c in big} - {c.name for c in small}
+        t = (self.own_t[extra.pop()] if len(extra) == 1 and len(small) < len(big)
+             else self.swap_t)
+        return True, t, f"daily gain t {t:.1f}"
+
+
+@pytest.mark.parametrize("own_t, swapped", [(0.9, True), (2.5, False)])
+def test_a_kept_edge_that_does_not_hold_day_after_day_is_replaced_on_the_criterion(own_t,
+                                                                                   swapped):
+    # T beats S by 150 but wins day after day with t 0.7 only; the daily test defends S when S
+    # holds itself (own t 2.5), not when its own daily gain is as weak (t 0.9)
+    sc = SupportScorer({S.name: 50.0, T.name: 200.0}, {S.name: own_t, T.name: 3.0}, 0.7)
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T])
+    assert [c.name for c in res.edges] == [T.name if swapped else S.name]
+    if swapped:
+        assert "own daily gain t 0.9 is below 2" in res.reasons[T.name]
+    # a swap that loses day after day (t < 0) is not made even against a weak edge
+    sc = SupportScorer({S.name: 50.0, T.name: 200.0}, {S.name: 0.9, T.name: 3.0}, -0.5)
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T])
+    assert [c.name for c in res.edges] == [S.name]
+
+
 class HeldScreen(DailyScorer):
     """A screening that holds the other parameters: ``screen_bias`` [criterion] is added to
     each alternative's screened change (the refit is the table's)."""
