@@ -33,7 +33,7 @@ from ...model import ConvectionParameters
 from .optimize import minimize_criterion
 
 __all__ = ["ParameterInterval", "IdentifiabilityReport", "hessian_fd", "wald_intervals",
-           "profile_likelihood", "identifiability"]
+           "profile_likelihood", "identifiability", "random_effects_inflation"]
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +108,10 @@ class IdentifiabilityReport:
         Set when the per-path R̄_v of the selected structure disagree
         (:func:`thermctl.identify.paths_disagree`): the shared R̄_v is not identified as one
         value.
+    heterogeneity : dict or None
+        Set when the shared R̄_v's interval was widened because the paths' own values scatter
+        beyond their intervals: ``paths``, Cochran's ``Q``, ``tau`` (between-path spread of
+        log R̄_v), ``ratio`` (variance factor) and the per-path ``rbar_v``.
     """
 
     intervals: dict
@@ -117,6 +121,7 @@ class IdentifiabilityReport:
     level: float
     short_calibration_days: float | None = None
     paths_disagree: tuple | None = None
+    heterogeneity: dict | None = None
 
     def widen(self, name: str, lower: float, upper: float, why: str,
               closed: tuple[bool, bool] = (True, True)) -> None:
@@ -272,6 +277,44 @@ def wald_intervals(problem, eta, level: float = 0.9, free=None, H=None, robust: 
                                         v if near_lo else p.upper, level, "wald", p.unit,
                                         False, False)
     return out, weak
+
+
+def random_effects_inflation(values, variances) -> tuple[float, float, float]:
+    """How much more a pooled value varies when its estimates disagree beyond their own
+    variances (DerSimonian & Laird, Controlled Clinical Trials 7, 1986).
+
+    ``k`` estimates ``y_i`` of one quantity with variances ``v_i``: ``Q = Σ w_i (y_i − ȳ)²``
+    with ``w_i = 1 / v_i`` and ``ȳ`` the inverse-variance mean; the between-estimate
+    variance ``τ² = max(0, (Q − (k − 1)) / (Σw − Σw² / Σw))``; the pooled value's variance
+    grows from ``1 / Σw`` (one common value) to ``1 / Σ 1 / (v_i + τ²)``. With equal
+    variances the ratio is ``max(1, Q / (k − 1))``.
+
+    Parameters
+    ----------
+    values, variances : array_like
+        The estimates and their variances (same units squared), at least two.
+
+    Returns
+    -------
+    Q : float
+        Cochran's heterogeneity statistic [-] (χ² with k − 1 degrees of freedom when the
+        estimates share one value).
+    tau2 : float
+        Between-estimate variance (units of ``values`` squared).
+    ratio : float
+        Pooled variance with τ² over without it (≥ 1) [-].
+    """
+    y = np.asarray(values, dtype=float)
+    v = np.asarray(variances, dtype=float)
+    if y.shape != v.shape or y.size < 2 or not np.all(v > 0) or not np.all(np.isfinite(y)):
+        raise EstimationError("random_effects_inflation needs at least two finite estimates "
+                              "with positive variances")
+    w = 1.0 / v
+    ybar = float(np.sum(w * y) / np.sum(w))
+    Q = float(np.sum(w * (y - ybar) ** 2))
+    tau2 = max(0.0, (Q - (y.size - 1)) / float(np.sum(w) - np.sum(w ** 2) / np.sum(w)))
+    ratio = float(np.sum(w) / np.sum(1.0 / (v + tau2)))
+    return Q, tau2, max(ratio, 1.0)
 
 
 def _determined(H, w, V, tol: float = 1e-12):
