@@ -46,6 +46,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import subprocess
 import time
 import warnings
 from pathlib import Path
@@ -120,7 +121,7 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
     measured = set(tb.spec.measured_zones)
     true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
     visible = {p for p in true if set(p) <= measured}
-    row = dict(study=study, case=name, seed=seed, days=days, session=SESSION,
+    row = dict(study=study, case=name, seed=seed, days=days, session=SESSION, commit=_COMMIT,
                kwargs=_plain(kwargs),
                building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
@@ -178,6 +179,8 @@ def _fmt(v, spec):
 
 
 SESSION = 21
+_COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                         cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
 
 

@@ -59,6 +59,38 @@ def test_too_few_days_or_test_off_leave_the_decision_to_the_criterion():
     assert ok and t == pytest.approx(1.447, abs=1e-3) and "needs" not in note
 
 
+def _predicting(day_nll, day_mse):
+    """A fitted stand-in whose daily 6-h prediction MSE is ``day_mse`` (memoised as the
+    scorer keeps it)."""
+    f = _fitted(day_nll)
+    f._block_mse = {(6 * 3600.0, 86400.0): (np.arange(len(day_mse)), np.asarray(day_mse, float))}
+    return f
+
+
+@pytest.mark.parametrize("gains, ok_expected, sign", [
+    # Pugh Hall, perfect sensors, seed 0: the true r240-r243 predicts 6 h ahead better on 9 of
+    # 10 days, but one day's loss outweighs them (t -0.8): the sign test (p 0.011) keeps it
+    ([0.07, 0.01, 0.01, 0.03, -1.0, 0.03, 0.01, 0.01, 0.01, 0.002], True, "p 0.011"),
+    # better on 8 of 10 only (p 0.055) and t below 2: fails
+    ([0.07, 0.01, -0.01, 0.03, -1.0, 0.03, 0.01, 0.01, 0.01, 0.002], False, None),
+    # twin house, doorway-kitchen: better on 16 of 31 days, t 0.9: fails
+    ([0.02] * 16 + [-0.015] * 15, False, None),
+])
+def test_prediction_gain_holds_by_t_or_by_the_sign_of_nearly_every_day(gains, ok_expected,
+                                                                       sign):
+    sc = _scorer(0.0)
+    sc.predict_t = 2.0
+    n = len(gains)
+    small = _predicting(np.full(n, 100.0), np.full(n, 2.0))
+    big = _predicting(np.full(n, 90.0), 2.0 - np.asarray(gains))
+    ok, t, note = sc.consistent(small, big)
+    assert ok is ok_expected
+    if sign:
+        assert f"sign test {sign}: holds" in note
+    else:
+        assert "sign test" not in note and t < 2.0
+
+
 class _Stub:
     """Scorer over edges {A, B}: both improve BIC by a lot; B's gain is not consistent."""
 

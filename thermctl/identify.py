@@ -1594,7 +1594,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
           f"one shared R̄_v on the {n} selected air path{'s' if n > 1 else ''}")
     head = (f"misfit check: R̄_v variance ratio {shown} (sandwich/Hessian, {of}), above "
             f"{lim:g}: every kept air path must also improve the 6-h prediction day after day "
-            f"(t >= {MISFIT_PREDICT_T:g})")
+            f"(t >= {MISFIT_PREDICT_T:g}, or on nearly every day by the sign test)")
     say(head.split(": ", 1)[1])
     kw = dict(sel_kw, candidates=list(sel.edges), direction="backward", start=(), swaps=None,
               predict_t=MISFIT_PREDICT_T)

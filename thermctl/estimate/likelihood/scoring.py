@@ -236,7 +236,10 @@ class LikelihoodScorer:
         not help, or hurt, the hours ahead an MPC acts over (on the twin house BIC keeps
         doorway–kitchen, a coupling between closed rooms whose likelihood gain has t 5.2
         over 31 days, and it predicts 6 h ahead worse on 28 of them; the Pugh Hall
-        testbed's true paths predict better on 20 of 20 days, t 7–8).
+        testbed's true paths predict better on 20 of 20 days, t 7–8). A day's squared
+        prediction error is heavy-tailed, so a prediction gain that fails its t test still
+        holds when the sign test says it is better on nearly every day (one-sided p ≤
+        :data:`SIGN_P`).
 
         Returns
         -------
@@ -253,10 +256,18 @@ class LikelihoodScorer:
         t, note = _day_t(g, self.min_t, "daily gain")
         ok = self.min_t <= 0 or not t < self.min_t
         if self.predict_t is not None:
-            tk, note_k = _day_t(self._daily_prediction_gains(small, big), self.predict_t,
-                                f"{self.predict_horizon / 3600:g}-h prediction")
+            gk = self._daily_prediction_gains(small, big)
+            tk, note_k = _day_t(gk, self.predict_t, f"{self.predict_horizon / 3600:g}-h prediction")
             if ok and tk < self.predict_t:
-                ok, t = False, tk
+                # a day's squared prediction error is heavy-tailed: one day of a large
+                # disturbance can outweigh nine better ones (Pugh Hall, perfect sensors,
+                # seed 0: the true r240-r243 predicts 6 h ahead better on 9 of 10 days, t
+                # -0.8). Better on nearly every day, by the sign test, also holds
+                p = _sign_p(gk)
+                if p <= SIGN_P:
+                    note_k += f" (sign test p {p:.3f}: holds)"
+                else:
+                    ok, t = False, tk
             note = f"{note}; {note_k}"
         return ok, t, note
 
@@ -406,6 +417,21 @@ def _paired_difference(ids_s, vs, ids_b, vb) -> np.ndarray:
     """``vs − vb`` over the blocks present in both (block numbers ``ids_s``, ``ids_b``)."""
     _, i_s, i_b = np.intersect1d(ids_s, ids_b, return_indices=True)
     return vs[i_s] - vb[i_b]
+
+
+SIGN_P = 0.025
+"""One-sided sign-test p value at or below which a prediction gain that fails its t test still
+holds day after day [-]: better on at least 9 of 10, 10 of 12, 12 of 14 or 22 of 31 days."""
+
+
+def _sign_p(g) -> float:
+    """One-sided sign-test p value of more positive than negative daily gains ``g`` (ties
+    left out; 1 with fewer than 4 days)."""
+    from scipy.stats import binomtest
+    pos, neg = int(np.sum(g > 0)), int(np.sum(g < 0))
+    if pos + neg < 4:
+        return 1.0
+    return float(binomtest(pos, pos + neg, 0.5, alternative="greater").pvalue)
 
 
 def _day_t(g, need: float, what: str) -> tuple[float, str]:
