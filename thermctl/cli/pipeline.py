@@ -140,9 +140,10 @@ def identify(
     predict_t: float | None = typer.Option(_D.selection.predict_t, "--predict-t",
                                            help="--selection model, whole building: t "
                                            "statistic of an edge's daily reduction of the "
-                                           "6-h-ahead prediction error it must reach as well "
-                                           "(default: not tested; -2: a veto on edges that "
-                                           "predict worse day after day)."),
+                                           "6-h-ahead prediction error it must reach as well, "
+                                           "unless it predicts better on nearly every day "
+                                           "(sign test, p <= 0.025) (default: not tested; -2: "
+                                           "a veto on edges that predict worse day after day)."),
     misfit_ratio: float = typer.Option(_D.selection.misfit_ratio, "--misfit-ratio", min=0.0,
                                        help="--selection model, whole building: when the "
                                        "selected model's R̄_v variance ratio (sandwich/Hessian) "
