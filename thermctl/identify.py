@@ -1703,8 +1703,9 @@ def _hetero_widen(ida, het, edges, notes) -> None:
     if iv is None or not (iv.lower > 0 and iv.value > 0):
         return
     f = math.sqrt(het["ratio"])
-    lo = iv.value * (iv.lower / iv.value) ** f
-    hi = iv.value * (iv.upper / iv.value) ** f
+    # a side the data do not close ends on the search bound already: it stays there
+    lo = iv.value * (iv.lower / iv.value) ** f if iv.closed_lower else iv.lower
+    hi = iv.value * (iv.upper / iv.value) ** f if iv.closed_upper else iv.upper
     ida.heterogeneity = het
     why = (f"widened ×{f:.2f} in log: the {len(het['paths'])} air paths' own R̄_v scatter "
            f"beyond their intervals (Cochran's Q {het['Q']:.1f} on {len(het['paths']) - 1} "
