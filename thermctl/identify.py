@@ -1541,7 +1541,10 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
     check = opt.selection.predict_t is None
     if (not lim or not (check or auto) or opt.selection.criterion == "holdout"
             or not sel.edges or getattr(gb, "criterion", None) != "likelihood"):
-        return _Checked(sel, per_edge=fixed)
+        shared = (not fixed and sel.edges and opt.selection.criterion != "holdout"
+                  and getattr(gb, "criterion", None) == "likelihood")
+        return _Checked(sel, per_edge=fixed,
+                        hetero=_path_heterogeneity(trials, sel, opt) if shared else None)
     from .estimate.likelihood import wald_intervals
     try:
         with warnings.catch_warnings():
@@ -1655,9 +1658,9 @@ def _path_heterogeneity(trials, sel, opt) -> dict | None:
     R̄_v's variance grows when the paths do not share one value. None with fewer than two
     paths whose intervals the data close.
     """
-    from .estimate.likelihood import wald_intervals
     from scipy.stats import norm
 
+    from .estimate.likelihood import wald_intervals
     from .estimate.likelihood.uncertainty import random_effects_inflation
     names = frozenset(air_path_name(a, b) for a, b, _ in sel.edges)
     fit = trials.get(names, (None,))[0]
