@@ -1539,12 +1539,11 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
     auto = isinstance(opt.estimation.per_edge, str)
     trials, sel.trials = sel.trials, {}     # fitted estimators: held no longer than this
     check = opt.selection.predict_t is None
-    if (not lim or not (check or auto) or opt.selection.criterion == "holdout"
-            or not sel.edges or getattr(gb, "criterion", None) != "likelihood"):
-        shared = (not fixed and sel.edges and opt.selection.criterion != "holdout"
+    likelihood = (bool(sel.edges) and opt.selection.criterion != "holdout"
                   and getattr(gb, "criterion", None) == "likelihood")
-        return _Checked(sel, per_edge=fixed,
-                        hetero=_path_heterogeneity(trials, sel, opt) if shared else None)
+    if not lim or not (check or auto) or not likelihood:
+        return _Checked(sel, per_edge=fixed, hetero=_path_heterogeneity(trials, sel, opt)
+                        if likelihood and not fixed else None)
     from .estimate.likelihood import wald_intervals
     try:
         with warnings.catch_warnings():
@@ -1666,16 +1665,17 @@ def _path_heterogeneity(trials, sel, opt) -> dict | None:
     fit = trials.get(names, (None,))[0]
     if len(names) < 2 or fit is None or getattr(fit, "problem_", None) is None:
         return None
+    level = 0.9
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            ivs = wald_intervals(fit.problem_, fit.eta_, threads=_threads(opt))[0]
+            ivs = wald_intervals(fit.problem_, fit.eta_, level, threads=_threads(opt))[0]
     except (EstimationError, np.linalg.LinAlgError) as exc:
         logger.info("path heterogeneity: no per-path intervals (%s)", exc)
         return None
     finally:
         fit.problem_.release_buffers()
-    z = float(norm.ppf(0.5 + ivs[next(iter(ivs))].level / 2)) if ivs else 1.0
+    z = float(norm.ppf(0.5 + level / 2))
     y, v, used = [], [], []
     for name in sorted(names):
         iv = ivs.get(ConvectionParameters.key(name))

@@ -14,7 +14,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
-from scipy.stats import gmean
+from scipy.stats import binomtest, gmean
 
 from ..._blas import ignore_warnings, single_thread_blas
 from ..._parallel import thread_map
@@ -427,7 +427,6 @@ holds day after day [-]: better on at least 9 of 10, 10 of 12, 12 of 14 or 22 of
 def _sign_p(g) -> float:
     """One-sided sign-test p value of more positive than negative daily gains ``g`` (ties
     left out; 1 with fewer than 4 days)."""
-    from scipy.stats import binomtest
     pos, neg = int(np.sum(g > 0)), int(np.sum(g < 0))
     if pos + neg < 4:
         return 1.0
