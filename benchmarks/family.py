@@ -178,7 +178,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 21
+SESSION = 22
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -279,6 +279,8 @@ def main(argv=None):
                     help="identify's --no-swaps (case names get ' [no swaps]'; the rows named "
                          "' [swaps]' were run when swaps were an option: --table shows them "
                          "as the default)")
+    ap.add_argument("--adds", action="store_true",
+                    help="identify's --adds (case names get ' [adds]')")
     ap.add_argument("--per-edge", action="store_true",
                     help="identify's --per-edge (case names get ' [per edge]')")
     ap.add_argument("--shared-rbar", action="store_true",
@@ -358,6 +360,9 @@ def main(argv=None):
         if args.no_swaps:
             sel["swaps"] = False
             name += " [no swaps]"
+        if args.adds:
+            sel["adds"] = True
+            name += " [adds]"
         if args.misfit_ratio is not None:
             sel["misfit_ratio"] = args.misfit_ratio
             name += f" [misfit {args.misfit_ratio:g}]"

@@ -219,3 +219,47 @@ def test_a_second_search_from_the_kept_edges_reuses_the_trials_of_the_first():
                          known=first.trials)
     assert [c.name for c in third.edges] == [S.name]
     assert strict.fits == [frozenset()]
+
+
+# two crossed substitutes: P (a-b) and Q (c-d) stand in for the true R (a-d) and X (b-c); a
+# single swap of either is worse, adding R pays (+20); beside R, X in P's place pays (+28) and
+# Q is then redundant (its removal costs 1)
+P, Q, R, X = cand("a", "b"), cand("c", "d"), cand("a", "d"), cand("b", "c")
+CROSSED = ({P.name: 50.0, Q.name: 50.0, R.name: 30.0, X.name: 30.0},
+           {frozenset(k): v for k, v in [
+               ((P.name, Q.name), 100.0), ((R.name, Q.name), 60.0), ((P.name, X.name), 60.0),
+               ((R.name, P.name), 90.0), ((X.name, Q.name), 90.0),
+               ((P.name, Q.name, R.name), 120.0), ((P.name, X.name, R.name), 125.0),
+               ((P.name, Q.name, X.name), 110.0),
+               ((P.name, Q.name, R.name, X.name), 150.0), ((Q.name, R.name, X.name), 148.0),
+               ((R.name, X.name), 147.0)]})
+
+
+def test_additions_reach_a_pair_of_substitutions_that_single_swaps_cannot():
+    plain = search_edges([P, Q], TableScorer(*CROSSED), direction="backward", margin=10.0,
+                         swaps=[P, Q, R, X])
+    assert sorted(c.name for c in plain.edges) == sorted([P.name, Q.name])
+    res = search_edges([P, Q], TableScorer(*CROSSED), direction="backward", margin=10.0,
+                       swaps=[P, Q, R, X], adds=True)
+    assert sorted(c.name for c in res.edges) == sorted([R.name, X.name])
+    assert res.value == pytest.approx(100.0 - 147.0)
+    steps = [(st.action, st.edge) for st in res.path if st.action in ("add", "remove", "swap")]
+    assert steps == [("add", R.name), ("swap", X.name), ("remove", Q.name)]
+    assert [st.delta for st in res.path if st.action in ("add", "swap")] == pytest.approx(
+        [-20.0, -28.0])
+    assert res.reasons[R.name].startswith("added: bic -20.0 when added")
+    assert res.reasons[P.name].startswith("swapped out: bic -28.0 when replaced by air:b-c")
+    assert res.reasons[Q.name].startswith("removed: bic only +1.0 when removed")
+
+
+def test_an_addition_must_hold_day_after_day_and_clear_the_margin():
+    # R's addition gains 20 but with a daily t of 1.0: refused; X's gains 10, not more than
+    # the margin: nothing is added
+    sc = DailyScorer(*CROSSED[:1], {R.name: 1.0})
+    sc.joint = CROSSED[1]
+    res = search_edges([P, Q], sc, direction="backward", margin=10.0, swaps=[P, Q, R, X],
+                       adds=True)
+    assert sorted(c.name for c in res.edges) == sorted([P.name, Q.name])
+    assert not any(st.action == "add" for st in res.path)
+    assert res.reasons[R.name].startswith("out: tried in place of a kept edge sharing a zone")
+    assert "tried as an addition, best screening bic change -20.0" in res.reasons[R.name]

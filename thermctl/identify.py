@@ -146,6 +146,11 @@ class SelectionOptions:
         proposed: on the Pugh Hall factor study (36 cases) swaps took recall from 0.91 to
         0.95 and the false paths from 0.42 to 0.19 per building (docs/identification.md,
         "Swaps"). Default on; local problems do not use it.
+    adds : bool
+        With ``swaps``: when no swap is made, also try adding one air path of the same set
+        (the best two screened, refitted) that improves the criterion by more than
+        ``margin`` with a daily-gain t of at least 2, then prune again: a floating search,
+        for substitutions that only pay together.
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the
@@ -170,6 +175,7 @@ class SelectionOptions:
     predict_t: float | None = None
     misfit_ratio: float = MISFIT_RATIO
     swaps: bool = True
+    adds: bool = False
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0
@@ -189,9 +195,10 @@ class SelectionOptions:
                 and not isinstance(self.misfit_ratio, bool) and self.misfit_ratio >= 0):
             raise DataError(f"identify option selection.misfit_ratio must be a number >= 0 "
                             f"(0: off), found {self.misfit_ratio!r}")
-        if not isinstance(self.swaps, (bool, np.bool_)):
-            raise DataError(f"identify option selection.swaps must be True or False, found "
-                            f"{self.swaps!r}")
+        for name in ("swaps", "adds"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise DataError(f"identify option selection.{name} must be True or False, "
+                                f"found {getattr(self, name)!r}")
         if not (isinstance(self.stability, (int, np.integer)) and self.stability >= 0):
             raise DataError(f"identify option selection.stability must be an integer >= 0 "
                             f"(resamples), found {self.stability!r}")
@@ -764,7 +771,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
         opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off)
         sel_kw = dict(candidates=cands, direction=direction, margin=opt.selection.margin,
                       start=start or (), swaps="all" if opt.selection.swaps else None,
-                      **_scorer_options(opt))
+                      adds=opt.selection.adds, **_scorer_options(opt))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
             sel = select_air_paths(spec, cal, progress=say, on_fit=on_fit,

@@ -123,7 +123,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      final_criterion: str = "likelihood", max_iter: int = 200,
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
-                     ahead=None, swaps=None, known=None, final=None,
+                     ahead=None, swaps=None, adds: bool = False, known=None,
+                     final=None,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -188,6 +189,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         After the backward pass, replacements of each kept edge by one of these that shares
         a zone with it (:func:`~thermctl.structure.search.search_edges`); ``all``: every
         pair of measured zones with a length. None: no swaps.
+    adds : bool
+        With ``swaps``: when no swap is made, also try adding one of them, and prune again
+        (:func:`~thermctl.structure.search.search_edges`).
     known : dict, optional
         Structures fitted already with the same data and model options (another
         selection's :attr:`SelectionResult.trials`); taken instead of fitted again.
@@ -224,7 +228,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     swaps = None if swaps is None else [by_name.get(c.name, c) for c in as_candidates(spec, swaps)]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
                        margin=margin, progress=progress, workers=workers, swaps=swaps,
-                       known=known)
+                       adds=adds, known=known)
     est, cur = res.fitted, res.edges
     per_edge = per_path_rbar(est) if cur else {}
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])

@@ -95,6 +95,11 @@ def identify(
                                "pass, replace a kept air path by one that shares a zone with "
                                "it (any measured pair) when that improves BIC by more than "
                                "--margin, then prune again."),
+    adds: bool = typer.Option(_D.selection.adds, "--adds/--no-adds",
+                              help="--selection model, whole building, with --swaps: when no "
+                              "swap is made, add the air path (any measured pair) that "
+                              "improves BIC by more than --margin with a daily-gain t >= 2, "
+                              "then prune again."),
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
@@ -254,7 +259,8 @@ def identify(
         selection=SelectionOptions(method=selection, candidates=candidates,
                                    criterion=selection_criterion, margin=margin,
                                    min_t=min_t, predict_t=predict_t,
-                                   misfit_ratio=misfit_ratio, swaps=swaps, stability=stability,
+                                   misfit_ratio=misfit_ratio, swaps=swaps, adds=adds,
+                                   stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
