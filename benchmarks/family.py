@@ -192,10 +192,15 @@ def _as_default(row):
     noise was one σ of each for the building: such rows get " [noise shared]"; a row of
     session 20 or later run with ``--noise zone`` is a default run and loses the label
     (earlier ``--noise zone`` rows keep it: session 20 fixed the Wald intervals that the
-    misfit check's trigger reads, which were NaN there).
+    misfit check's trigger reads, which were NaN there). Session 22's rows run with
+    ``--adds`` alone (before additions became the default) are default runs and lose
+    " [adds]"; earlier rows stay default rows (the studies re-run then: the factors, the
+    first family, and the broadened family's rows that say session 22).
     """
     if row.get("selection") == {"swaps": True} and not row.get("estimation"):
         row = dict(row, case=row["case"].replace(" [swaps]", ""))
+    if row.get("selection") == {"adds": True} and row.get("session", 0) >= 22:
+        row = dict(row, case=row["case"].replace(" [adds]", ""))
     noise = (row.get("estimation") or {}).get("noise")
     if row.get("session", 0) < 20 and noise is None:
         row = dict(row, case=row["case"] + " [noise shared]")
@@ -279,8 +284,10 @@ def main(argv=None):
                     help="identify's --no-swaps (case names get ' [no swaps]'; the rows named "
                          "' [swaps]' were run when swaps were an option: --table shows them "
                          "as the default)")
-    ap.add_argument("--adds", action="store_true",
-                    help="identify's --adds (case names get ' [adds]')")
+    ap.add_argument("--no-adds", action="store_true",
+                    help="identify's --no-adds (case names get ' [no adds]'; session 22's rows "
+                         "named ' [adds]' were run when additions were an option: --table "
+                         "shows them as the default)")
     ap.add_argument("--per-edge", action="store_true",
                     help="identify's --per-edge (case names get ' [per edge]')")
     ap.add_argument("--shared-rbar", action="store_true",
@@ -360,9 +367,9 @@ def main(argv=None):
         if args.no_swaps:
             sel["swaps"] = False
             name += " [no swaps]"
-        if args.adds:
-            sel["adds"] = True
-            name += " [adds]"
+        if args.no_adds:
+            sel["adds"] = False
+            name += " [no adds]"
         if args.misfit_ratio is not None:
             sel["misfit_ratio"] = args.misfit_ratio
             name += f" [misfit {args.misfit_ratio:g}]"

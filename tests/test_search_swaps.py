@@ -263,3 +263,45 @@ def test_an_addition_must_hold_day_after_day_and_clear_the_margin():
     assert not any(st.action == "add" for st in res.path)
     assert res.reasons[R.name].startswith("out: tried in place of a kept edge sharing a zone")
     assert "tried as an addition, best screening bic change -20.0" in res.reasons[R.name]
+
+
+def test_an_addition_that_replaces_nothing_is_undone():
+    # T gains 30 beside S and makes nothing redundant: the model would grow, so the search
+    # goes back to S alone (its keep step redone from the fits made, no new fit)
+    sc = TableScorer({S.name: 50.0, T.name: 30.0})
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T], adds=True)
+    assert [c.name for c in res.edges] == [S.name]
+    assert res.value == pytest.approx(50.0)
+    actions = [st.action for st in res.path]
+    assert actions == ["start", "keep", "add", "keep", "undo", "keep"]
+    assert res.reasons[T.name].startswith("out: added: bic -30.0 when added")
+    assert res.reasons[T.name].endswith("without replacing an edge: undone")
+    assert res.reasons[S.name] == "in; removing it costs bic +50.0"
+    n = len(sc.fits)
+    assert len(set(sc.fits)) == n       # the redone keep step fitted nothing again
+
+
+@pytest.mark.slow
+def test_additions_recover_an_open_door_that_crossed_substitutes_hid():
+    """Pugh Hall with an open door in the r241|r242 partition, 14 days, seed 0. SIN proposes
+    4 paths, 3 of them wrong (r241-r244 and r242-r247 cross the true r241-r247 and
+    r242-r244; r242-r243 stands in for the door), and no single swap improves on them.
+    Additions reach the truth: the door (BIC -37.4, daily t 2.6), r241-r247 (-15.5, t 3.4;
+    r242-r247 goes), r242-r244 (-29.5, t 2.3; r241-r244 and r242-r243 go)."""
+    from thermctl.data import read_measurements
+    from thermctl.identify import IdentifyOptions, SelectionOptions, identify
+    from thermctl.testbed import generate, pugh_hall_spec
+    spec, edges = pugh_hall_spec()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=14, seed=0, building=(spec, list(edges) + [("r241", "r242", 4.0)]))
+        meas = read_measurements(tb.data, tb.spec, name="door")
+        true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
+        found = {}
+        for adds in (False, True):
+            opt = IdentifyOptions(selection=SelectionOptions(adds=adds))
+            opt.estimation.intervals = "none"
+            ident = identify(meas, opt)
+            found[adds] = {tuple(sorted((e.a, e.b))) for e in ident.model.network.convection_edges}
+    assert len(found[False] & true) == 1 and len(found[False] - true) == 3
+    assert found[True] == true
