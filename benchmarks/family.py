@@ -314,7 +314,9 @@ def main(argv=None):
                "labelled [noise shared]; session 20's --noise zone runs are the defaults). "
                "Since session 21 a swap may replace a kept edge whose own daily gain has t "
                "below 2 on the criterion alone; the rows of the studies re-run then say "
-               "session 21 in family-runs.jsonl. "
+               "session 21 in family-runs.jsonl. Since session 22 the search also tries "
+               "additions that substitute (--adds; the factors and the first family were "
+               "re-run, and the family rows that say session 22). "
                "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]
