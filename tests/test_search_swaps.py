@@ -265,20 +265,41 @@ def test_an_addition_must_hold_day_after_day_and_clear_the_margin():
     assert "tried as an addition, best screening bic change -20.0" in res.reasons[R.name]
 
 
-def test_an_addition_that_replaces_nothing_is_undone():
-    # T gains 30 beside S and makes nothing redundant: the model would grow, so the search
-    # goes back to S alone (its keep step redone from the fits made, no new fit)
-    sc = TableScorer({S.name: 50.0, T.name: 30.0})
-    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T], adds=True)
+def test_an_addition_beside_a_wall_that_replaces_nothing_is_undone():
+    # D (a-c, beside a wall) gains 30 beside S and makes nothing redundant: the model would
+    # grow by a path beside a wall, so the search goes back to S alone (its keep step redone
+    # from the fits made, no new fit)
+    D = Candidate("a", "c", 3.0, True, False)
+    sc = TableScorer({S.name: 50.0, D.name: 30.0})
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, D], adds=True)
     assert [c.name for c in res.edges] == [S.name]
     assert res.value == pytest.approx(50.0)
     actions = [st.action for st in res.path]
     assert actions == ["start", "keep", "add", "keep", "undo", "keep"]
-    assert res.reasons[T.name].startswith("out: added: bic -30.0 when added")
-    assert res.reasons[T.name].endswith("without replacing an edge: undone")
+    assert res.reasons[D.name].startswith("out: added: bic -30.0 when added")
+    assert "enters by addition only in place of another: undone" in res.reasons[D.name]
     assert res.reasons[S.name] == "in; removing it costs bic +50.0"
-    n = len(sc.fits)
-    assert len(set(sc.fits)) == n       # the redone keep step fitted nothing again
+    assert len(set(sc.fits)) == len(sc.fits)    # the redone keep step fitted nothing again
+
+
+def test_an_addition_away_from_walls_may_grow_the_model():
+    # the same gains with T (a-c) away from walls: the model grows to S + T
+    sc = TableScorer({S.name: 50.0, T.name: 30.0})
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T], adds=True)
+    assert sorted(c.name for c in res.edges) == sorted([S.name, T.name])
+    assert res.value == pytest.approx(20.0)
+    assert [st.action for st in res.path] == ["start", "keep", "add", "keep"]
+
+
+def test_growth_by_a_wall_path_goes_back_to_the_best_structure_that_grew_by_open_paths():
+    # T (open) enters first (+30), then D (beside a wall, +20): S + T + D grew by a wall path;
+    # the best structure that grew by open paths only is S + T, not S alone
+    D = Candidate("b", "d", 3.0, True, False)
+    sc = TableScorer({S.name: 50.0, T.name: 30.0, D.name: 20.0})
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T, D], adds=True)
+    assert sorted(c.name for c in res.edges) == sorted([S.name, T.name])
+    assert [st.action for st in res.path] == ["start", "keep", "add", "keep", "add", "keep",
+                                              "undo", "keep"]
 
 
 @pytest.mark.slow

@@ -89,8 +89,8 @@ class SelectionStep:
         (``thermctl identify``'s misfit check).
         ``keep``: the backward pass ended; ``screened`` holds the criterion change of
         removing each kept edge. ``add`` after a ``keep``: an addition of ``adds``;
-        ``undo``: the additions grew the model, and the search went back to the best
-        structure no larger than before them.
+        ``undo``: the additions grew the model by a path beside a wall, and the search went
+        back to the best structure that grew by paths away from walls only.
     edge : str or None
     value : float
         Criterion of the structure after this step (lower is better).
@@ -252,9 +252,10 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         substitutions that only pay together are out of reach of single swaps: an open
         door r241–r242 whose rooms passed for each other through the hallway (Pugh Hall
         with a door, seed 0: SIN's 4 picks, 3 wrong, the truth better by 80.6 but three
-        swaps away, each alone worse or failing the daily test). Additions substitute: if
-        the model ends larger than before them, the search goes back to the best structure
-        (at the end of a round) no larger than that.
+        swaps away, each alone worse or failing the daily test). A path beside a wall
+        enters by addition only as a substitute: if the model ends larger than before the
+        additions and not by paths away from walls alone, the search goes back to the best
+        structure (at the end of a round) that grew by such paths only.
     known : dict, optional
         Structures fitted already by a scorer of the same data and model options (another
         search's :attr:`SearchResult.trials`): frozenset of edge names → ``(fit,
@@ -536,25 +537,27 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 if key in seen:         # back where an earlier round ended: a cycle
                     break
                 seen.add(key)
-            if before is not None and len(cur) > len(before[1]):
-                # additions substitute, they do not grow the model: BIC is a good pruner and
-                # a poor gatekeeper (Pugh Hall, seed 1: a false door beside the r240|r241
+            if before is not None and not _may_grow(cur, before[1]):
+                # a path beside a wall enters by addition only as a substitute: BIC is a
+                # good pruner and a poor gatekeeper, and such a path is confounded with the
+                # wall's conduction (Pugh Hall, seed 1: a false door beside the r240|r241
                 # wall gains 42 with daily t 2.2 and a 6-h prediction t 4.0, as strong as
-                # the true door of the case above). The best structure no larger than the
-                # one the additions started from is kept; its keep step is redone from the
-                # fits made (no new fit)
+                # the true door of the case above, and replaces nothing). The best
+                # structure whose growth is paths away from walls is kept; its keep step is
+                # redone from the fits made (no new fit). A path through open space may
+                # grow the model (ring of offices, 3R2C plant, seed 1: the true n0-s0
+                # across the core, BIC -111.3, t 2.1)
                 grown = {x.name for x in cur}
-                val, cur, fitted = min([before] + [e for e in ends
-                                                   if len(e[1]) <= len(before[1])],
+                val, cur, fitted = min([before] + [e for e in ends if _may_grow(e[1], before[1])],
                                        key=lambda e: e[0])
                 for name in sorted(grown - {x.name for x in cur}):
-                    reasons[name] = (f"out: {entered.pop(name, 'added')}, but the additions "
-                                     f"grew the model without replacing an edge: undone")
+                    reasons[name] = (f"out: {entered.pop(name, 'added')}, but a path beside a "
+                                     f"wall enters by addition only in place of another: undone")
                 path.append(SelectionStep("undo", None, val, 0.0, [x.name for x in cur],
-                                          note="the additions grew the model without "
-                                               "replacing an edge: back to the best structure "
-                                               "no larger than before them"))
-                say("undo: the additions grew the model without replacing an edge")
+                                          note="the additions grew the model by a path beside a "
+                                               "wall: back to the best structure that grew by "
+                                               "paths away from walls only"))
+                say("undo: the additions grew the model by a path beside a wall")
                 backward()
             # the alternatives a swap tried join the candidates (with why they are out)
             for name in sorted(set(swap_screen) | set(add_screen)):
@@ -589,6 +592,14 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     trials = {k: v for k, v in done.items() if k == names or (len(k) == len(names) - 1
                                                                and k < names)}
     return SearchResult(cur, cands, path, reasons, fitted, val, trials)
+
+
+def _may_grow(edges, before) -> bool:
+    """Whether ``edges`` is at most ``before``'s size once the paths added away from walls are
+    set aside (what additions may grow the model by)."""
+    old = {x.name for x in before}
+    new_open = sum(1 for x in edges if x.name not in old and not x.parallel)
+    return len(edges) - new_open <= len(before)
 
 
 def as_candidates(spec, candidates=None) -> list:
