@@ -315,8 +315,9 @@ def main(argv=None):
                "Since session 21 a swap may replace a kept edge whose own daily gain has t "
                "below 2 on the criterion alone; the rows of the studies re-run then say "
                "session 21 in family-runs.jsonl. Since session 22 the search also tries "
-               "additions that substitute (--adds; the factors and the first family were "
-               "re-run, and the family rows that say session 22). "
+               "additions (--adds; a path beside a wall only in place of another): the "
+               "factors and the first family were re-run, and the family rows that say "
+               "session 22. "
                "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]
