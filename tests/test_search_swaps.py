@@ -177,24 +177,33 @@ def test_the_refits_go_to_two_different_alternatives_whatever_their_screening_si
     assert sc.fits[3:5] == [frozenset((W.name, X.name)), frozenset((W.name, T.name))]
 
 
+def _paths_found(tb, option):
+    """The testbed's true paths, and the paths `identify` keeps with the selection ``option``
+    off and on (intervals skipped)."""
+    from thermctl.data import read_measurements
+    from thermctl.identify import IdentifyOptions, SelectionOptions, identify
+    true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
+    found = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meas = read_measurements(tb.data, tb.spec, name=option)
+        for on in (False, True):
+            opt = IdentifyOptions(selection=SelectionOptions(**{option: on}))
+            opt.estimation.intervals = "none"
+            ident = identify(meas, opt)
+            found[on] = {tuple(sorted((e.a, e.b))) for e in ident.model.network.convection_edges}
+    return true, found
+
+
 def test_swaps_recover_the_true_path_a_substitute_held_on_the_testbed():
     """Pugh Hall, control at the data step, 14 days, seed 1: the default search keeps
     r243–r247 in place of the true r241–r247 (the true structure's BIC is 171 better than
     the one found); with swaps the three true paths and no false one (22 s)."""
-    from thermctl.data import read_measurements
-    from thermctl.identify import IdentifyOptions, SelectionOptions, identify
     from thermctl.testbed import generate
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate(days=14, seed=1, control_minutes=5, plant="rc-exact")
-        meas = read_measurements(tb.data, tb.spec, name="control")
-        true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
-        found = {}
-        for swaps in (False, True):
-            opt = IdentifyOptions(selection=SelectionOptions(swaps=swaps))
-            opt.estimation.intervals = "none"
-            ident = identify(meas, opt)
-            found[swaps] = {tuple(sorted((e.a, e.b))) for e in ident.model.network.convection_edges}
+    true, found = _paths_found(tb, "swaps")
     assert found[False] != true and ("r243", "r247") in found[False]
     assert found[True] == true
 
@@ -309,20 +318,11 @@ def test_additions_recover_an_open_door_that_crossed_substitutes_hid():
     r242-r244; r242-r243 stands in for the door), and no single swap improves on them.
     Additions reach the truth: the door (BIC -37.4, daily t 2.6), r241-r247 (-15.5, t 3.4;
     r242-r247 goes), r242-r244 (-29.5, t 2.3; r241-r244 and r242-r243 go)."""
-    from thermctl.data import read_measurements
-    from thermctl.identify import IdentifyOptions, SelectionOptions, identify
     from thermctl.testbed import generate, pugh_hall_spec
     spec, edges = pugh_hall_spec()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate(days=14, seed=0, building=(spec, list(edges) + [("r241", "r242", 4.0)]))
-        meas = read_measurements(tb.data, tb.spec, name="door")
-        true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
-        found = {}
-        for adds in (False, True):
-            opt = IdentifyOptions(selection=SelectionOptions(adds=adds))
-            opt.estimation.intervals = "none"
-            ident = identify(meas, opt)
-            found[adds] = {tuple(sorted((e.a, e.b))) for e in ident.model.network.convection_edges}
+    true, found = _paths_found(tb, "adds")
     assert len(found[False] & true) == 1 and len(found[False] - true) == 3
     assert found[True] == true
