@@ -508,8 +508,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         d = v_new - val
         cur = cur + [c]
         fitted, val = f_new, v_new
-        path.append(SelectionStep("add", c.name, val, d, [x.name for x in cur],
-                                  {k: v for k, v in screened.items()},
+        path.append(SelectionStep("add", c.name, val, d, [x.name for x in cur], dict(screened),
                                   note="added after the swaps" + (f", {why}" if why else "")))
         entered[c.name] = f"added: {crit} {d:+.1f} when added" + (f", {why}" if why else "")
         say(f"added {c.name} ({crit} {d:+.1f}{', ' + why if why else ''})")
