@@ -178,7 +178,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 22
+SESSION = 23
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -317,7 +317,7 @@ def main(argv=None):
                "session 21 in family-runs.jsonl. Since session 22 the search also tries "
                "additions (--adds; a path beside a wall only in place of another): the "
                "factors and the first family were re-run, and the family rows that say "
-               "session 22. "
+               "session 22 (the finite-volume l-shape seed 1: session 23). "
                "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]
