@@ -88,7 +88,7 @@ def main(argv=None):
         cal, _ = read_measurements(args.data / "data.csv", spec).split()
     print(f"twin house N2, calibration {cal.frame.index[0]} to {cal.frame.index[-1]}, "
           "one L-BFGS-B fit per row")
-    print(f"{'noise':7s} {'structure':26s} {'start':5s} {'params':>6s} {'evals':>6s} "
+    print(f"{'noise':7s} {'structure':28s} {'start':5s} {'params':>6s} {'evals':>6s} "
           f"{'CPU s':>6s} {'nll':>10s}")
     more = DOORS + [COUPLING]
     for noise in ("shared", "zone"):
@@ -101,7 +101,7 @@ def main(argv=None):
         rows.append(("3 doors, from the row above", "warm",
                      *fit(spec, cal, DOORS, noise, init=dict(big[0].params_))))
         for what, start, est, n, cpu in rows:
-            print(f"{noise:7s} {what:26s} {start:5s} {len(est.params_):6d} {n:6d} "
+            print(f"{noise:7s} {what:28s} {start:5s} {len(est.params_):6d} {n:6d} "
                   f"{cpu:6.1f} {est.nll_:10.1f}")
 
 
