@@ -22,7 +22,9 @@ Restarts tried (session 23, not kept): the sensor noises found on the bound back
 reached the cold optimum in one run of two; every noise parameter back at its default start
 (the physical ones kept) reached -57491.6 with the coupling, but took the cold 3 doors'
 fit to -56959.5 (worse, so the first run is kept) and costs 100-300 evaluations more per fit
-(on the twin house nearly every fit ends with a sensor noise on its bound).
+(on the twin house nearly every fit ends with a sensor noise on its bound); the same reset
+only on fits that grow a structure improved 1 of 22 fits on the twin house, which ended at
+the same 3 doors for 2.5x the CPU (docs/identification.md).
 
 Usage: ``OMP_NUM_THREADS=1 python benchmarks/noise_fits.py [--data DIR]``
 """
