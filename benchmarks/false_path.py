@@ -15,6 +15,9 @@ factor at a time. Per row:
   misfit check's test: it keeps a path with t ≥ 2);
 * ``a3–b0`` — R̄_v of the true path a3–b0 in the fit of ``T`` (truth 3.36e-4 K/(W m)).
 
+The ``nights only`` rows count the default's samples (3 h after the supply went off) between
+20:00 and 06:00 only: no weekend daytime.
+
 Usage::
 
     python benchmarks/false_path.py                   # every row (about 1 CPU min each)
@@ -61,6 +64,8 @@ ROWS = {
     "fast gain on": ({}, dict(fast_gain=True), False),
     "noise shared": ({}, dict(noise="shared"), False),
     "t innovations": ({}, dict(innovations="student"), False),
+    "nights only": ({}, dict(_nights=True), False),
+    "fd, nights only": (dict(plant="fd"), dict(_nights=True), False),
 }
 
 
@@ -117,10 +122,17 @@ def row(name):
         warnings.simplefilter("ignore")
         meas, true = data(gen, lobby)
         sc = selection_scorer(meas)
-        sc.kw.update(model)
+        model = dict(model)
         spec = sc.spec
         T = [_cand(spec, p) for p in true]
         F = T + [_cand(spec, FALSE)]
+        if model.pop("_nights", False):
+            # the samples the default counts (3 h after the supply went off), at night only
+            rows = sc.fit(T)[0].problem_for(sc.train).fit_rows
+            t = sc.train.time
+            hour = np.asarray(t.hour + t.minute / 60.0)
+            model["fit_rows"] = rows & ((hour >= 20.0) | (hour < 6.0))
+        sc.kw.update(model)
         eT, bT = sc.fit(T)
         eF, bF = sc.fit(F)
         sc.predict_t = 2.0
