@@ -149,7 +149,8 @@ def row(name):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS))
+    ap.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS), metavar="ROW",
+                    help="rows to run (default: all): " + "; ".join(ROWS))
     args = ap.parse_args(argv)
     print("| variant | true paths | dBIC | top day | day t | 6-h t (days better) | a3–b0 R̄v | "
           "CPU s |")
