@@ -14,7 +14,9 @@ factor at a time. Per row:
 * ``6-h t`` — the 6-h prediction gain's t statistic and the days it is better on (the
   misfit check's test: it keeps a path with t ≥ 2);
 * ``a3–b0`` — R̄_v of the true path a3–b0 in the fit of ``T`` (truth 3.36e-4 K/(W m));
-  ``true R̄v`` — the geometric mean over the true paths.
+  ``true R̄v`` — the geometric mean over the true paths;
+* with ``--removals``, a line more: BIC(T without p) − BIC(T) for each true path p (the
+  search removes a path whose removal costs less than 10).
 
 ``--building open-plan`` and ``--building ring`` ask the same of the family's other false
 paths at seed 0 (p00–p12 on the open plan, 3R2C plant; n2–s0 on the ring, finite-volume
@@ -60,6 +62,7 @@ BUILDINGS = {
     "ring": (dict(family.ALL, building="ring", plant="fd"), ("n2", "s0")),
 }
 BASE, FALSE = BUILDINGS["l-shape"]
+REMOVALS = False
 
 # name: (generate() changes, scorer option changes, make the lobby measured)
 ROWS = {
@@ -149,6 +152,9 @@ def row(name):
         sc.kw.update(model)
         eT, bT = sc.fit(T)
         eF, bF = sc.fit(F)
+        # --removals: what each true path costs to remove, BIC(T − p) − BIC(T)
+        cost = {c.name: sc.fit([x for x in T if x is not c])[1] - bT for c in T} \
+            if REMOVALS else {}
         sc.predict_t = 2.0
         g = sc._daily_gains(eT, eF)
         gk = sc._daily_prediction_gains(eT, eF)
@@ -162,6 +168,9 @@ def row(name):
           f"{t:.1f} | {tk:.1f} ({int((gk > 0).sum())}/{len(gk)}) | {rb:.3g} | "
           f"{float(np.exp(np.mean(np.log(rbs)))):.3g} | {time.process_time() - t0:.0f} |",
           flush=True)
+    if cost:
+        print("|   removal costs of the true paths | " + ", ".join(
+            f"{k.removeprefix('air:')} {v:+.1f}" for k, v in cost.items()) + " |", flush=True)
 
 
 def main(argv=None):
@@ -170,9 +179,12 @@ def main(argv=None):
                     help="the layout and its false path (default: l-shape, a0-b0)")
     ap.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS), metavar="ROW",
                     help="rows to run (default: all): " + "; ".join(ROWS))
+    ap.add_argument("--removals", action="store_true",
+                    help="also fit T without each true path: what removing it costs in BIC")
     args = ap.parse_args(argv)
-    global BASE, FALSE
+    global BASE, FALSE, REMOVALS
     BASE, FALSE = BUILDINGS[args.building]
+    REMOVALS = args.removals
     print(f"{args.building}, false path {'-'.join(FALSE)}")
     print("| variant | true paths | dBIC | top day | day t | 6-h t (days better) | a3–b0 R̄v | "
           "true R̄v (geometric mean) | CPU s |")
