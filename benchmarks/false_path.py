@@ -27,7 +27,7 @@ The ``nights only`` rows count the default's samples (3 h after the supply went 
 
 Usage::
 
-    python benchmarks/false_path.py                   # every row (about 1 CPU min each)
+    python benchmarks/false_path.py                   # every row (1-4 CPU min each)
     python benchmarks/false_path.py --rows default fd  # some of them
     python benchmarks/false_path.py --building open-plan --rows default "hourly, nobody at weekends"
 """
@@ -47,6 +47,7 @@ import family  # noqa: E402  (benchmarks/family.py: the family's generate() argu
 
 import thermctl.selection as _selection  # noqa: E402
 from thermctl.data import read_measurements  # noqa: E402
+from thermctl.estimate.likelihood.scoring import _day_t  # noqa: E402
 from thermctl.identify import IdentifyOptions, identify  # noqa: E402
 from thermctl.spec import spec_from_dict  # noqa: E402
 from thermctl.structure.search import _cand  # noqa: E402
@@ -61,8 +62,6 @@ BUILDINGS = {
     "open-plan": (dict(family.ALL, building="open-plan", plant="rc-exact"), ("p00", "p12")),
     "ring": (dict(family.ALL, building="ring", plant="fd"), ("n2", "s0")),
 }
-BASE, FALSE = BUILDINGS["l-shape"]
-REMOVALS = False
 
 # name: (generate() changes, scorer option changes, make the lobby measured)
 ROWS = {
@@ -109,8 +108,8 @@ def selection_scorer(meas):
     return box["scorer"]
 
 
-def data(gen, lobby_measured):
-    gen = dict(BASE, **gen)
+def data(building, gen, lobby_measured):
+    gen = dict(BUILDINGS[building][0], **gen)
     seed = gen.pop("_seed", 0)
     weekend = disturbances.HOURLY_WEEKEND
     try:
@@ -129,20 +128,22 @@ def data(gen, lobby_measured):
         noise = np.random.default_rng(5).normal(0.0, 0.05, len(frame))
         frame.insert(0, "T:lobby", tb.states[:, i] + noise)
     true = sorted(tuple(sorted(e[:2])) for e in tb.truth.edges)
-    return read_measurements(frame, spec, name="l-shape"), true
+    return read_measurements(frame, spec, name=building), true
 
 
-def row(name):
+def row(name, building="l-shape", removals=False):
+    """Print the table row ``name`` of ``building`` (and its removal costs)."""
     gen, model, lobby = ROWS[name]
+    false = BUILDINGS[building][1]
     t0 = time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meas, true = data(gen, lobby)
+        meas, true = data(building, gen, lobby)
         sc = selection_scorer(meas)
         model = dict(model)
         spec = sc.spec
         T = [_cand(spec, p) for p in true]
-        F = T + [_cand(spec, FALSE)]
+        F = T + [_cand(spec, false)]
         if model.pop("_nights", False):
             # the samples the default counts (3 h after the supply went off), at night only
             rows = sc.fit(T)[0].problem_for(sc.train).fit_rows
@@ -154,12 +155,11 @@ def row(name):
         eF, bF = sc.fit(F)
         # --removals: what each true path costs to remove, BIC(T − p) − BIC(T)
         cost = {c.name: sc.fit([x for x in T if x is not c])[1] - bT for c in T} \
-            if REMOVALS else {}
+            if removals else {}
         sc.predict_t = 2.0
         g = sc._daily_gains(eT, eF)
         gk = sc._daily_prediction_gains(eT, eF)
-    t = g.mean() / (g.std(ddof=1) / np.sqrt(len(g)))
-    tk = gk.mean() / (gk.std(ddof=1) / np.sqrt(len(gk)))
+    t, tk = _day_t(g, 0.0, "")[0], _day_t(gk, 0.0, "")[0]
     # the best day's share means something only where the path gains overall
     top = f"{g.max() / g.sum():.0%}" if bF < bT else "—"
     rb = eT.params_.get("rbar_v[air:a3-b0]", float("nan"))
@@ -182,15 +182,12 @@ def main(argv=None):
     ap.add_argument("--removals", action="store_true",
                     help="also fit T without each true path: what removing it costs in BIC")
     args = ap.parse_args(argv)
-    global BASE, FALSE, REMOVALS
-    BASE, FALSE = BUILDINGS[args.building]
-    REMOVALS = args.removals
-    print(f"{args.building}, false path {'-'.join(FALSE)}")
+    print(f"{args.building}, false path {'-'.join(BUILDINGS[args.building][1])}")
     print("| variant | true paths | dBIC | top day | day t | 6-h t (days better) | a3–b0 R̄v | "
           "true R̄v (geometric mean) | CPU s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in args.rows:
-        row(name)
+        row(name, args.building, args.removals)
 
 
 if __name__ == "__main__":
