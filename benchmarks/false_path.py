@@ -16,7 +16,8 @@ factor at a time. Per row:
 * ``a3–b0`` — R̄_v of the true path a3–b0 in the fit of ``T`` (truth 3.36e-4 K/(W m));
   ``true R̄v`` — the geometric mean over the true paths;
 * with ``--removals``, a line more: BIC(T without p) − BIC(T) for each true path p (the
-  search removes a path whose removal costs less than 10).
+  search removes a path whose removal costs less than 10) and the daily t of its likelihood
+  gain (``--min-t`` asks for at least that).
 
 ``--building open-plan`` and ``--building ring`` ask the same of the family's other false
 paths at seed 0 (p00–p12 on the open plan, 3R2C plant; n2–s0 on the ring, finite-volume
@@ -153,9 +154,12 @@ def row(name, building="l-shape", removals=False):
         sc.kw.update(model)
         eT, bT = sc.fit(T)
         eF, bF = sc.fit(F)
-        # --removals: what each true path costs to remove, BIC(T − p) − BIC(T)
-        cost = {c.name: sc.fit([x for x in T if x is not c])[1] - bT for c in T} \
-            if removals else {}
+        # --removals: what each true path costs to remove, BIC(T − p) − BIC(T), and the
+        # daily t of its likelihood gain (what --min-t would ask of it)
+        cost = {}
+        for c in (T if removals else ()):
+            e_minus, b_minus = sc.fit([x for x in T if x is not c])
+            cost[c.name] = (b_minus - bT, _day_t(sc._daily_gains(e_minus, eT), 0.0, "")[0])
         sc.predict_t = 2.0
         g = sc._daily_gains(eT, eF)
         gk = sc._daily_prediction_gains(eT, eF)
@@ -170,7 +174,8 @@ def row(name, building="l-shape", removals=False):
           flush=True)
     if cost:
         print("|   removal costs of the true paths | " + ", ".join(
-            f"{k.removeprefix('air:')} {v:+.1f}" for k, v in cost.items()) + " |", flush=True)
+            f"{k.removeprefix('air:')} {v:+.1f} (t {t:.1f})" for k, (v, t) in cost.items())
+              + " |", flush=True)
 
 
 def main(argv=None):
