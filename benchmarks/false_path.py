@@ -52,7 +52,6 @@ from thermctl.estimate.likelihood.scoring import _day_t  # noqa: E402
 from thermctl.identify import IdentifyOptions, identify  # noqa: E402
 from thermctl.spec import spec_from_dict  # noqa: E402
 from thermctl.structure.search import _cand  # noqa: E402
-from thermctl.testbed import disturbances, generate  # noqa: E402
 
 # --building: (generate() arguments with every family factor on, the false path it keeps)
 BUILDINGS = {
@@ -111,13 +110,7 @@ def selection_scorer(meas):
 
 def data(building, gen, lobby_measured):
     gen = dict(BUILDINGS[building][0], **gen)
-    seed = gen.pop("_seed", 0)
-    weekend = disturbances.HOURLY_WEEKEND
-    try:
-        disturbances.HOURLY_WEEKEND = gen.pop("_hourly_weekend", weekend)
-        tb = generate(days=16, seed=seed, **gen)
-    finally:
-        disturbances.HOURLY_WEEKEND = weekend
+    tb = family.simulate(gen, gen.get("_seed", 0), 16)
     spec, frame = tb.spec, tb.data
     if lobby_measured:
         # the lobby's own temperature (the plant's, plus 0.05 K of sensor noise) as a column
@@ -148,8 +141,8 @@ def row(name, building="l-shape", removals=False):
         if model.pop("_nights", False):
             # the samples the default counts (3 h after the supply went off), at night only
             rows = sc.fit(T)[0].problem_for(sc.train).fit_rows
-            t = sc.train.time
-            hour = np.asarray(t.hour + t.minute / 60.0)
+            stamps = sc.train.time
+            hour = np.asarray(stamps.hour + stamps.minute / 60.0)
             model["fit_rows"] = rows & ((hour >= 20.0) | (hour < 6.0))
         sc.kw.update(model)
         eT, bT = sc.fit(T)

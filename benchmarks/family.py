@@ -97,23 +97,29 @@ def _plain(kwargs) -> dict:
             getattr(v, "__name__", repr(v)) for k, v in kwargs.items()}
 
 
-def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
-    """Generate, identify with the defaults (``estimation``, ``selection``:
-    EstimationOptions, SelectionOptions fields to change), score; one dict."""
-    t0 = time.perf_counter()
+def simulate(kwargs, seed, days):
+    """The testbed of a case: ``generate()`` with ``kwargs`` (keys starting with ``_`` are
+    diagnostic variants, e.g. ``_hourly_weekend``, the hourly model's weekend level)."""
     gen_kw = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     if callable(gen_kw.get("building")):
         # benchmarks/identification.py's pugh-door: a function giving (spec, edges)
         gen_kw["building"] = gen_kw["building"]()
     weekend = disturbances.HOURLY_WEEKEND
     try:
-        # a diagnostic variant: the hourly model's weekend level (a module constant)
+        # the weekend level is a module constant
         disturbances.HOURLY_WEEKEND = kwargs.get("_hourly_weekend", weekend)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            tb = generate(days=days, seed=seed, **gen_kw)
+            return generate(days=days, seed=seed, **gen_kw)
     finally:
         disturbances.HOURLY_WEEKEND = weekend
+
+
+def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
+    """Generate, identify with the defaults (``estimation``, ``selection``:
+    EstimationOptions, SelectionOptions fields to change), score; one dict."""
+    t0 = time.perf_counter()
+    tb = simulate(kwargs, seed, days)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         meas = read_measurements(tb.data, tb.spec, name=name)
