@@ -274,6 +274,30 @@ def test_an_addition_must_hold_day_after_day_and_clear_the_margin():
     assert "tried as an addition, best screening bic change -20.0" in res.reasons[R.name]
 
 
+@pytest.mark.parametrize("add_refits, added", [(2, False), (4, True)])
+def test_additions_go_on_down_the_screening_while_the_refitted_fail_the_daily_test(
+        add_refits, added):
+    # beside S: X (a-f) and Y (a-g) screen best (-30, -25) and refit to gains of 30 and 25,
+    # but hold on too few days (t 1.5, 1.6); the true T (a-c) screens third (-5: the held
+    # screening misses 35 of its gain) and refits to a gain of 40 with t 3.4 (the open plan's
+    # p02-p12, 3R2C plant, seed 0). Two refits stop at X and Y; four reach T
+    X, Y = cand("a", "f"), cand("a", "g")
+    sc = HeldScreen({S.name: 50.0, X.name: 30.0, Y.name: 25.0, T.name: 40.0},
+                    {X.name: 1.5, Y.name: 1.6, T.name: 3.4}, {}, {T.name: 35.0})
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, X, Y, T, U],
+                       adds=True, add_refits=add_refits)
+    assert sorted(c.name for c in res.edges) == sorted([S.name] + [T.name] * added)
+    refits = [k for k in sc.fits if len(k) == 2]
+    if added:
+        # X and Y first (the best-screened pair), then T and U; after T's addition the next
+        # round refits the best-screened of what is left beside S and T
+        assert refits[:4] == [frozenset((S.name, X.name)), frozenset((S.name, Y.name)),
+                              frozenset((S.name, T.name)), frozenset((S.name, U.name))]
+        assert res.reasons[T.name].startswith("added: bic -40.0 when added")
+    else:
+        assert set(refits) == {frozenset((S.name, X.name)), frozenset((S.name, Y.name))}
+
+
 def test_an_addition_beside_a_wall_that_replaces_nothing_is_undone():
     # D (a-c, beside a wall) gains 30 beside S and makes nothing redundant: the model would
     # grow by a path beside a wall, so the search goes back to S alone (its keep step redone
