@@ -148,15 +148,14 @@ class SelectionOptions:
         "Swaps"). Default on; local problems do not use it.
     adds : bool
         With ``swaps``: when no swap is made, also try adding one air path of the same set
-        (refitted in the screening's order, two at a time, up to four) that improves the
-        criterion by more than ``margin`` with a daily-gain t of at least 2, then prune
-        again: a floating search, for substitutions that only pay together. A path beside a
-        wall enters this way only in place of another: a model that grew by one goes back to
-        the best structure that grew by paths away from walls only. On the first family
-        (18 buildings, 14 days) recall 0.88 → 1.00 with 0.22 → 0.06 false paths per
-        building (Pugh Hall with a door, seed 0: 1/4 and 3 false → 4/4); the factor study
-        and the twin house select what they did (docs/identification.md, "Additions").
-        Default on.
+        (the best two screened, refitted) that improves the criterion by more than
+        ``margin`` with a daily-gain t of at least 2, then prune again: a floating search,
+        for substitutions that only pay together. A path beside a wall enters this way only
+        in place of another: a model that grew by one goes back to the best structure that
+        grew by paths away from walls only. On the first family (18 buildings, 14 days)
+        recall 0.88 → 1.00 with 0.22 → 0.06 false paths per building (Pugh Hall with a
+        door, seed 0: 1/4 and 3 false → 4/4); the factor study and the twin house select
+        what they did (docs/identification.md, "Additions"). Default on.
     stability : int
         Stability selection: B resamples of half the calibration days (blocks of 2
         consecutive days, :func:`thermctl.stability.stability_selection`), each running the
