@@ -507,8 +507,9 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         # true path, +2 false), so the default stops at two
         order = sorted(screened, key=screened.get)
         best = None
-        for i in range(0, min(len(order), max(add_refits, 2)), 2):
-            top = order[i:min(i + 2, max(add_refits, 2))]
+        limit = min(len(order), max(add_refits, 2))
+        for i in range(0, limit, 2):
+            top = order[i:min(i + 2, limit)]
             fit_missing([cur + [swap_by_name[n]] for n in top])
             for name in top:
                 f_new, v_new = done[frozenset(names | {name})]
