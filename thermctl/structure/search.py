@@ -260,7 +260,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         At most this many additions refitted in a round (two at a time, best-screened
         first, stopping at the first pair with one that clears the margin and the daily
         test); at least 2. Four were measured on the broadened family (session 25): one true
-        path more on one open plan, one fewer on another, and two false paths more; the
+        path more on one open plan, one fewer on another, and three false paths more; the
         default stays at the two best-screened (docs/identification.md, "Additions down the
         screening").
     known : dict, optional
@@ -504,7 +504,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         # -18.4 and -14.5, refit to -43.7 and -26.9 but hold on the days with t 1.6 and 1.7;
         # the true p02-p12, screened third at -4.1, refits to -36.0 with t 3.4). Going on
         # finds false paths that pass the same tests as often (broadened family: +1 and -1
-        # true path, +2 false), so the default stops at two
+        # true path, +3 false), so the default stops at two
         order = sorted(screened, key=screened.get)
         best = None
         limit = min(len(order), max(add_refits, 2))
