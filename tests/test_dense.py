@@ -47,17 +47,20 @@ def test_shapes_checked():
     assert dense_mtimes(ca.MX.sym("a", 0, 3), ca.MX.sym("b", 3, 2)).shape == (0, 2)
 
 
-def _sequential(F, G, S, restart, L):
-    """x_{k+1} = F x_k + g_k step by step in time order (MX), from the chunk layout."""
+def _sequential(F, G, S, restart, L, regime=None):
+    """x_{k+1} = F x_k + g_k step by step in time order (MX), from the chunk layout; with
+    ``regime``, chunk c steps with ``F[:, r·n:(r+1)·n]``, r = regime[c]."""
     n, M = F.shape[0], len(restart)
     cols = [None] * (L * M)
     x = None
     for c in range(M):
+        r = 0 if regime is None else regime[c]
+        Fc = F[:, r * n:(r + 1) * n]
         for j in range(L):
             if j == 0 and restart[c] >= 0:
                 x = S[:, restart[c]]
             cols[j * M + c] = x
-            x = ca.mtimes(F, x) + G[:, j * M + c]
+            x = ca.mtimes(Fc, x) + G[:, j * M + c]
     return ca.horzcat(*cols)
 
 
@@ -83,6 +86,40 @@ def test_recursion_matches_step_by_step(L, restart):
         out.append([np.asarray(v) for v in ca.Function("f", [x], [X, f, g, H, J])(x0)])
     for a, b in zip(*out):
         np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.parametrize("L,restart,regime", [(4, [0, -1, -1, 1, -1, 2], [0, 1, 1, 0, 1, 0]),
+                                              (1, [0, -1, 1], [1, 0, 1]),
+                                              (3, [0, -1, -1, -1], [0, 2, 1, 2])])
+def test_switched_recursion_matches_step_by_step(L, restart, regime):
+    """One matrix per chunk (the occupied-hours filter): values, gradients, Hessians and
+    forward Jacobians equal those of the step-by-step recursion, to 1e-11."""
+    from thermctl.estimate.likelihood._dense import linear_recursion
+    rng = np.random.default_rng(10 + L)
+    n, M = 3, len(restart)
+    R = max(regime) + 1
+    nseg = max(restart) + 1
+    x = ca.MX.sym("x", 3)
+    blocks = [ca.DM(rng.normal(size=(n, n)) * 0.3) + ca.diag((0.1 + 0.1 * r) * ca.tanh(x))
+              for r in range(R)]
+    blocks[-1] = blocks[-1] * ca.exp(0.2 * x[0])
+    F = ca.horzcat(*blocks)
+    G = ca.DM(rng.normal(size=(n, L * M))) * ca.exp(x[1])
+    S = ca.DM(rng.normal(size=(n, nseg))) * (1 + x[2] ** 2)
+    W = ca.DM(rng.normal(size=(n, L * M)))
+    x0 = rng.normal(size=3)
+    out = []
+    for X in (linear_recursion(F, G, S, restart, L, regime),
+              _sequential(F, G, S, restart, L, regime)):
+        f = ca.sum1(ca.sum2(W * X)) + ca.sumsqr(X) / 7
+        H, g = ca.hessian(f, x)
+        J = ca.jacobian(ca.vec(X), x)
+        out.append([np.asarray(v) for v in ca.Function("f", [x], [X, f, g, H, J])(x0)])
+    for a, b in zip(*out):
+        np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
+    # and the regimes matter: with every chunk on matrix 0 the states differ
+    X0 = ca.Function("x", [x], [linear_recursion(F[:, :n], G, S, restart, L)])(x0)
+    assert np.abs(np.asarray(X0) - out[0][0]).max() > 1e-3
 
 
 @pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="glibc only")

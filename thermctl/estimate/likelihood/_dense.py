@@ -19,6 +19,7 @@ import threading
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 __all__ = ["dense_mtimes", "linear_recursion", "BufferedFunction"]
 
@@ -139,7 +140,7 @@ class _Matmul(_DenseCallback):
 
 
 # ---------------------------------------------------------------------- the recursion
-def linear_recursion(F, GZ, starts, restart, L: int):
+def linear_recursion(F, GZ, starts, restart, L: int, regime=None):
     r"""All states of ``x_{k+1} = F x_k + g_k``, segment by segment, evaluated by numpy.
 
     The contract of :func:`thermctl.estimate.likelihood.kalman.chunked_recursion` (chunk
@@ -150,24 +151,71 @@ def linear_recursion(F, GZ, starts, restart, L: int):
 
     Parameters
     ----------
-    F : casadi.MX, shape (n, n)
+    F : casadi.MX, shape (n, n) or (n, n·R)
+        With ``regime``: the R matrices side by side, ``F_r = F[:, r·n:(r+1)·n]``.
     GZ : casadi.MX, shape (n, L·M)
     starts : casadi.MX, shape (n, n_segments)
     restart : sequence of int, length M
     L : int
+    regime : sequence of int, length M, optional
+        ``regime[c]``: the matrix every step of chunk ``c`` uses (the step out of its last
+        column into chunk ``c + 1`` included). Default: one matrix.
 
     Returns
     -------
     casadi.MX, shape (n, L·M)
     """
-    cb = _cached(("rec", F.shape[0], L, tuple(restart), starts.shape[1]), _Recursion)
+    reg = _regime_key(regime, len(restart))
+    cb = _cached(("rec", F.shape[0], L, tuple(restart), starts.shape[1], reg), _Recursion)
     return cb(ca.densify(F), ca.densify(GZ), ca.densify(starts))
 
 
-def _adjoint(F, Xb, restart, L: int):
+def _regime_key(regime, M: int):
+    """``regime`` as a tuple of M ints, or None for a single matrix."""
+    if regime is None:
+        return None
+    reg = tuple(int(r) for r in regime)
+    if len(reg) != M:
+        raise ValueError(f"regime: {len(reg)} entries for {M} chunks")
+    if min(reg) < 0:
+        raise ValueError("regime: indices must be >= 0")
+    return None if max(reg) == 0 else reg
+
+
+def _n_regimes(reg) -> int:
+    return 1 if reg is None else max(reg) + 1
+
+
+def _column_masks(reg, L: int):
+    """Per regime, the sparse diagonal (L·M, L·M) selecting the columns of its chunks."""
+    M = len(reg)
+    cols = np.tile(np.asarray(reg), L)        # column j·M + c belongs to chunk c
+    return [ca.DM(sp.diags((cols == r).astype(float)).tocsc()) for r in range(_n_regimes(reg))]
+
+
+def _split(F, n: int, R: int):
+    """The R (n, n) blocks of ``F`` (n, n·R)."""
+    return [F[:, r * n:(r + 1) * n] for r in range(R)]
+
+
+def _per_regime(dF, Y, masks, n):
+    """``Σ_r dF_r (Y D_r)``: each column of ``Y`` times its own regime's block of ``dF``."""
+    if masks is None:
+        return dense_mtimes(dF, Y)
+    return sum(dense_mtimes(dF[:, r * n:(r + 1) * n], ca.mtimes(Y, D)) for r, D in enumerate(masks))
+
+
+def _per_regime_outer(Gb, X, masks):
+    """``[(Ḡ D_0) Xᵀ, (Ḡ D_1) Xᵀ, ...]``: the derivative of each regime's block."""
+    if masks is None:
+        return dense_mtimes(Gb, X.T)
+    return ca.horzcat(*[dense_mtimes(ca.mtimes(Gb, D), X.T) for D in masks])
+
+
+def _adjoint(F, Xb, restart, L: int, regime=None):
     """``Ḡ`` of :func:`linear_recursion` for the output seed ``Xb`` (see :class:`_Adjoint`)."""
     n = F.shape[0]
-    cb = _cached(("adj", n, L, tuple(restart)), _Adjoint)
+    cb = _cached(("adj", n, L, tuple(restart), _regime_key(regime, len(restart))), _Adjoint)
     return cb(ca.densify(F), ca.densify(Xb))
 
 
@@ -180,10 +228,12 @@ def _cached(key, cls):
     return cb
 
 
-def _rec_np(F, G, S, restart, L, out):
+def _rec_np(F, G, S, restart, L, out, regime=None):
     """numpy kernel of :func:`linear_recursion` into ``out``; ``G`` and ``out`` are (n, L·M)
     column-major chunk layouts, viewed as (n, M, L) so that every step is one contiguous block."""
     n, M = F.shape[0], len(restart)
+    if regime is not None:
+        return _rec_np_regimes(F, G, S, restart, L, out, regime)
     G3 = G.reshape((n, M, L), order="F")           # [i, c, j] = G[i, j·M + c]
     X = out.reshape((n, M, L), order="F")
     # pass 1: every chunk from zero (X[:, :, j] holds that partial state for now)
@@ -209,11 +259,57 @@ def _rec_np(F, G, S, restart, L, out):
             H = F @ H
 
 
-def _adj_np(F, Xb, restart, L, out):
-    """numpy kernel of the adjoint into ``out``: ``Ḡ_k = λ_{k+1}`` where the step k → k+1
-    exists, else 0, with ``λ_k = X̄_k + Fᵀ λ_{k+1}`` backward in each segment."""
+def _rec_np_regimes(F, G, S, restart, L, out, regime):
+    """:func:`_rec_np` with one matrix per chunk, ``F[:, r·n:(r+1)·n]`` for ``regime[c] = r``:
+    the same three passes, each regime's chunks multiplied together."""
     n, M = F.shape[0], len(restart)
-    FT = F.T
+    reg = np.asarray(regime)
+    Fs = _split(F, n, _n_regimes(regime))
+    groups = [(Fr, np.flatnonzero(reg == r)) for r, Fr in enumerate(Fs)]
+    groups = [(Fr, idx) for Fr, idx in groups if len(idx)]
+    G3 = G.reshape((n, M, L), order="F")
+    X = out.reshape((n, M, L), order="F")
+    X[:, :, 0] = 0.0
+    last = np.zeros((n, M))
+    for j in range(L):
+        nxt = X[:, :, j + 1] if j + 1 < L else last
+        for Fr, idx in groups:
+            nxt[:, idx] = Fr @ X[:, idx, j]
+        nxt += G3[:, :, j]
+    FL = [np.linalg.matrix_power(Fr, L) for Fr in Fs]
+    H = np.empty((n, M), order="F")
+    x = None
+    for c in range(M):
+        if restart[c] >= 0:
+            x = S[:, restart[c]]
+        H[:, c] = x
+        x = FL[reg[c]] @ x + last[:, c]
+    for j in range(L):
+        X[:, :, j] += H
+        if j + 1 < L:
+            for Fr, idx in groups:
+                H[:, idx] = Fr @ H[:, idx]
+
+
+def _adj_np(F, Xb, restart, L, out, regime=None):
+    """numpy kernel of the adjoint into ``out``: ``Ḡ_k = λ_{k+1}`` where the step k → k+1
+    exists, else 0, with ``λ_k = X̄_k + Fᵀ λ_{k+1}`` backward in each segment (``F`` of the
+    chunk of step k where there are regimes)."""
+    n, M = F.shape[0], len(restart)
+    reg = np.zeros(M, dtype=int) if regime is None else np.asarray(regime)
+    FTs = [Fr.T for Fr in _split(F, n, _n_regimes(regime))]
+    groups = [(FT, np.flatnonzero(reg == r)) for r, FT in enumerate(FTs)]
+    groups = [(FT, idx) for FT, idx in groups if len(idx)]
+    single = len(groups) == 1 and len(groups[0][1]) == M
+
+    def step(FT_groups, A):
+        if single:
+            return FT_groups[0][0] @ A
+        B = np.empty_like(A)
+        for FT, idx in FT_groups:
+            B[:, idx] = FT @ A[:, idx]
+        return B
+
     Xb3 = Xb.reshape((n, M, L), order="F")
     Gb = out.reshape((n, M, L), order="F")
     # λ within each chunk with nothing coming in: λ_{c,j} is stored at Gb[:, c, j − 1]
@@ -221,21 +317,21 @@ def _adj_np(F, Xb, restart, L, out):
     first = np.empty((n, M))
     for j in range(L - 1, 0, -1):
         Gb[:, :, j - 1] = acc
-        acc = FT @ acc
+        acc = step(groups, acc)
         acc += Xb3[:, :, j - 1]
     first[:] = acc                                   # λ_{c,0} of the chunk alone
-    FLT = np.linalg.matrix_power(FT, L)
+    FLT = [np.linalg.matrix_power(FT, L) for FT in FTs]
     mu = np.zeros((n, M), order="F")                 # λ at the start of the next chunk
     nxt = np.zeros(n)
     for c in range(M - 1, -1, -1):
         if c + 1 < M and restart[c + 1] < 0:
             mu[:, c] = nxt
-        nxt = first[:, c] + FLT @ mu[:, c]
+        nxt = first[:, c] + FLT[reg[c]] @ mu[:, c]
     # add what comes in from the next chunk: λ_{c,j} += (Fᵀ)^{L−j} μ_c
     Gb[:, :, L - 1] = mu
     Hb = mu
     for j in range(L - 1, 0, -1):
-        Hb = FT @ Hb
+        Hb = step(groups, Hb)
         Gb[:, :, j - 1] += Hb
 
 
@@ -243,38 +339,42 @@ class _Recursion(_DenseCallback):
     """``X = rec(F, GZ, starts)`` (:func:`linear_recursion`).
 
     Derivatives: forward ``Ẋ = rec(F, ĠZ + Ḟ X, ṡtarts)``; reverse ``ḠZ = adj(F, X̄)``,
-    ``F̄ = ḠZ Xᵀ``, ``s̄tarts`` from ``λ`` at each segment's first step.
+    ``F̄ = ḠZ Xᵀ``, ``s̄tarts`` from ``λ`` at each segment's first step. With regimes each
+    column takes its own chunk's block of ``Ḟ`` and gives to its own block of ``F̄``.
     """
 
-    def __init__(self, n, L, restart, nseg):
+    def __init__(self, n, L, restart, nseg, regime=None):
         ca.Callback.__init__(self)
         self.n, self.L, self.restart, self.nseg = n, L, list(restart), nseg
         self.M = len(restart)
+        self.regime = regime
+        self.R = _n_regimes(regime)
+        self.masks = None if regime is None else _column_masks(regime, L)
         sel = np.zeros((self.M, nseg))
         for c, s in enumerate(self.restart):
             if s >= 0:
                 sel[c, s] = 1.0
         self.sel = ca.DM(sel)
-        self.ins, self.out = ((n, n), (n, L * self.M), (n, nseg)), (n, L * self.M)
+        self.ins, self.out = ((n, n * self.R), (n, L * self.M), (n, nseg)), (n, L * self.M)
         self._construct(f"recursion_{n}x{L}x{self.M}_{id(self):x}")
 
     def compute(self, F, GZ, S, out):
-        _rec_np(F, GZ, S, self.restart, self.L, out)
+        _rec_np(F, GZ, S, self.restart, self.L, out, self.regime)
 
     def _syms(self):
         n, LM = self.n, self.L * self.M
-        return (ca.MX.sym("F", n, n), ca.MX.sym("GZ", n, LM), ca.MX.sym("S", n, self.nseg),
-                ca.MX.sym("X", n, LM))
+        return (ca.MX.sym("F", n, n * self.R), ca.MX.sym("GZ", n, LM),
+                ca.MX.sym("S", n, self.nseg), ca.MX.sym("X", n, LM))
 
     def get_forward(self, nfwd, name, inames, onames, opts):
-        n, LM, ns = self.n, self.L * self.M, self.nseg
+        n, LM, ns, nR = self.n, self.L * self.M, self.nseg, self.n * self.R
         F, GZ, S, X = self._syms()
-        dF = ca.MX.sym("dF", n, n * nfwd)
+        dF = ca.MX.sym("dF", n, nR * nfwd)
         dG = ca.MX.sym("dG", n, LM * nfwd)
         dS = ca.MX.sym("dS", n, ns * nfwd)
         out = [linear_recursion(F, dG[:, i * LM:(i + 1) * LM]
-                                + dense_mtimes(dF[:, i * n:(i + 1) * n], X),
-                                dS[:, i * ns:(i + 1) * ns], self.restart, self.L)
+                                + _per_regime(dF[:, i * nR:(i + 1) * nR], X, self.masks, n),
+                                dS[:, i * ns:(i + 1) * ns], self.restart, self.L, self.regime)
                for i in range(nfwd)]
         return ca.Function(name, [F, GZ, S, X, dF, dG, dS], [ca.horzcat(*out)], inames, onames,
                            opts)
@@ -284,47 +384,63 @@ class _Recursion(_DenseCallback):
         F, GZ, S, X = self._syms()
         Xb = ca.MX.sym("Xb", n, LM * nadj)
         Fb, Gb, Sb = [], [], []
+        if self.masks is None:
+            head = None
+        else:   # the regime of each chunk's first column
+            head = [ca.DM(sp.diags((np.asarray(self.regime) == r).astype(float)).tocsc())
+                    for r in range(self.R)]
         for i in range(nadj):
             xb = Xb[:, i * LM:(i + 1) * LM]
-            gb = _adjoint(F, xb, self.restart, self.L)
-            Fb.append(dense_mtimes(gb, X.T))
+            gb = _adjoint(F, xb, self.restart, self.L, self.regime)
+            Fb.append(_per_regime_outer(gb, X, self.masks))
             Gb.append(gb)
             # λ at a chunk's first step (columns 0..M−1): X̄ there plus Fᵀ λ one step on
-            Sb.append(ca.mtimes(xb[:, :M] + dense_mtimes(F.T, gb[:, :M]), self.sel))
+            FTg = _per_regime(_transposed_blocks(F, n, self.R), gb[:, :M], head, n)
+            Sb.append(ca.mtimes(xb[:, :M] + FTg, self.sel))
         return ca.Function(name, [F, GZ, S, X, Xb],
                            [ca.horzcat(*Fb), ca.horzcat(*Gb), ca.horzcat(*Sb)],
                            inames, onames, opts)
+
+
+def _transposed_blocks(F, n: int, R: int):
+    """``[F_0ᵀ, F_1ᵀ, ...]`` side by side."""
+    return ca.horzcat(*[F[:, r * n:(r + 1) * n].T for r in range(R)])
 
 
 class _Adjoint(_DenseCallback):
     """``Ḡ = adj(F, X̄)``: the reverse sweep of :class:`_Recursion`, linear in ``X̄``.
 
     Derivatives: forward ``Ḡ̇ = adj(F, Ẋ̄ + Ḟᵀ Ḡ)``; reverse ``ν = rec(F, Ḡ̄, 0)``,
-    ``X̄̄ = ν``, ``F̄ = Ḡ νᵀ``.
+    ``X̄̄ = ν``, ``F̄ = Ḡ νᵀ`` (per regime block, as in :class:`_Recursion`).
     """
 
-    def __init__(self, n, L, restart):
+    def __init__(self, n, L, restart, regime=None):
         ca.Callback.__init__(self)
         self.n, self.L, self.restart = n, L, list(restart)
         self.M = len(restart)
+        self.regime = regime
+        self.R = _n_regimes(regime)
+        self.masks = None if regime is None else _column_masks(regime, L)
         self.nseg = max(max(self.restart) + 1, 1)
-        self.ins, self.out = ((n, n), (n, L * self.M)), (n, L * self.M)
+        self.ins, self.out = ((n, n * self.R), (n, L * self.M)), (n, L * self.M)
         self._construct(f"recursion_adj_{n}x{L}x{self.M}_{id(self):x}")
 
     def compute(self, F, Xb, out):
-        _adj_np(F, Xb, self.restart, self.L, out)
+        _adj_np(F, Xb, self.restart, self.L, out, self.regime)
 
     def _syms(self):
         n, LM = self.n, self.L * self.M
-        return ca.MX.sym("F", n, n), ca.MX.sym("Xb", n, LM), ca.MX.sym("Gb", n, LM)
+        return ca.MX.sym("F", n, n * self.R), ca.MX.sym("Xb", n, LM), ca.MX.sym("Gb", n, LM)
 
     def get_forward(self, nfwd, name, inames, onames, opts):
-        n, LM = self.n, self.L * self.M
+        n, LM, nR = self.n, self.L * self.M, self.n * self.R
         F, Xb, Gb = self._syms()
-        dF = ca.MX.sym("dF", n, n * nfwd)
+        dF = ca.MX.sym("dF", n, nR * nfwd)
         dX = ca.MX.sym("dX", n, LM * nfwd)
         out = [_adjoint(F, dX[:, i * LM:(i + 1) * LM]
-                        + dense_mtimes(dF[:, i * n:(i + 1) * n].T, Gb), self.restart, self.L)
+                        + _per_regime(_transposed_blocks(dF[:, i * nR:(i + 1) * nR], n, self.R),
+                                      Gb, self.masks, n),
+                        self.restart, self.L, self.regime)
                for i in range(nfwd)]
         return ca.Function(name, [F, Xb, Gb, dF, dX], [ca.horzcat(*out)], inames, onames, opts)
 
@@ -335,8 +451,9 @@ class _Adjoint(_DenseCallback):
         zero = ca.MX(n, self.nseg)
         Fb, Xbb = [], []
         for i in range(nadj):
-            nu = linear_recursion(F, Gbb[:, i * LM:(i + 1) * LM], zero, self.restart, self.L)
-            Fb.append(dense_mtimes(Gb, nu.T))
+            nu = linear_recursion(F, Gbb[:, i * LM:(i + 1) * LM], zero, self.restart, self.L,
+                                  self.regime)
+            Fb.append(_per_regime_outer(Gb, nu, self.masks))
             Xbb.append(nu)
         return ca.Function(name, [F, Xb, Gb, Gbb], [ca.horzcat(*Fb), ca.horzcat(*Xbb)],
                            inames, onames, opts)
