@@ -87,6 +87,8 @@ ROWS = {
     "fast gain on": ({}, dict(fast_gain=True), False),
     "noise shared": ({}, dict(noise="shared"), False),
     "t innovations": ({}, dict(innovations="student"), False),
+    "gain schedule": ({}, dict(gain_schedule="occupied"), False),
+    "fd, gain schedule": (dict(plant="fd"), dict(gain_schedule="occupied"), False),
     "nights only": ({}, dict(_nights=True), False),
     "fd, nights only": (dict(plant="fd"), dict(_nights=True), False),
 }

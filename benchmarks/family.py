@@ -184,7 +184,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 25
+SESSION = 26
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -281,6 +281,9 @@ def main(argv=None):
                          "per zone, since session 20)")
     ap.add_argument("--common-gain", type=int, default=0, metavar="N",
                     help="identify's --common-gain (case names get ' [common N]')")
+    ap.add_argument("--gain-schedule", choices=["occupied"], default=None,
+                    help="identify's estimation.gain_schedule: the gains wander faster in "
+                         "occupied hours (case names get ' [schedule occupied]')")
     ap.add_argument("--selection", metavar="CANDIDATES:CRITERION",
                     help="identify's --candidates and --selection-criterion, e.g. all:holdout "
                          "(case names get ' [all:holdout]')")
@@ -365,6 +368,9 @@ def main(argv=None):
             name, est["per_edge"] = name + " [shared]", False
         if args.common_gain:
             name, est["common_gain"] = name + f" [common {args.common_gain}]", args.common_gain
+        if args.gain_schedule:
+            name, est["gain_schedule"] = name + f" [schedule {args.gain_schedule}]", \
+                args.gain_schedule
         sel = {}
         if args.selection:
             cand, _, crit = args.selection.partition(":")

@@ -224,6 +224,54 @@ def test_problem_likelihood_equals_time_varying_filter(sim5, net5):
     assert pb.n_obs == kr.n_obs
 
 
+def test_gain_schedule_is_a_filter_whose_gain_switches_with_the_hour(sim5, net5):
+    """``gain_schedule="occupied"``: the likelihood equals a numpy filter that runs each row
+    on its regime's stationary gain and scores it with its regime's S (to 1e-10); with the
+    ratio at 1 it is the model without the schedule; the regimes follow the hours."""
+    data, opts = sim5
+    data = copy.copy(data)
+    data.time = pd.date_range("2024-01-12 00:00", periods=len(data), freq=f"{DT:g}s")
+    sched = LikelihoodProblem(net5, data, LikelihoodOptions(**{**opts.__dict__,
+                                                               "gain_schedule": "occupied"}))
+    base = LikelihoodProblem(net5, data, opts)
+    hours = np.asarray(data.time.hour)
+    occ = (hours >= 7) & (hours < 19)
+    # chunks of at most 30 min: every row's regime is that of its own hour
+    assert sched.L * DT <= 1800
+    assert np.array_equal(sched.row_regime.astype(bool), occ)
+    eta = sched.layout.eta0()
+    i = sched.layout.index("occ_ratio")
+    eta[i] = np.log(6.0)
+    m = sched.matrices(eta)
+    # the occupied hours add (ratio − 1) times the gains' share of Qd: PSD, linear in it
+    D6 = m["Qd_occ"] - m["Qd"]
+    e3 = eta.copy()
+    e3[i] = np.log(3.0)
+    D3 = sched.matrices(e3)["Qd_occ"] - m["Qd"]
+    np.testing.assert_allclose(D6, 2.5 * D3, rtol=1e-9, atol=1e-12 * np.abs(D6).max())
+    assert np.linalg.eigvalsh(D6).min() > -1e-9 * np.abs(D6).max() and np.trace(D6) > 0
+    assert np.trace(m["P_occ"]) > np.trace(m["P"])
+    W = sched.inputs(eta)
+    gains = {0: (m["Kf"], m["S"]), 1: (m["Kf_occ"], m["S_occ"])}
+    nll = 0.0
+    for s, (a, b) in enumerate(sched.segments):
+        x = m["X0"][:, s].copy()
+        for k in range(a, b):
+            K, S = gains[sched.row_regime[k]]
+            e = data.Y[k] - sched.C @ x
+            if k - a >= sched.burn and sched.fit_rows[k]:
+                nll += 0.5 * (e @ np.linalg.solve(S, e) + np.log(np.linalg.det(S))
+                              + sched.ny * kalman.LOG2PI)
+            x = m["Phi"] @ (x + K @ e) + m["Gamma"] @ W[k]
+    assert sched.nll(eta) == pytest.approx(nll, rel=1e-10)
+    # ratio 1: the same filter day and night, the model without the schedule
+    eta[i] = 0.0
+    e0 = base.layout.eta0()
+    assert sched.nll(eta) == pytest.approx(base.nll(e0), rel=1e-10)
+    with pytest.raises(EstimationError, match="random_walk"):
+        LikelihoodOptions(gain_schedule="occupied", disturbance="none").check()
+
+
 def test_student_innovations_are_the_multivariate_t_density(sim5, net5):
     """``innovations="student"``: the stationary filter's innovations scored by scipy's
     multivariate t with the filter's S as scale; ν → ∞ gives the Gaussian likelihood."""
@@ -266,6 +314,7 @@ def test_student_innovations_are_the_multivariate_t_density(sim5, net5):
     {"innovations": "student"},                  # nu fitted: through the lgamma series
     {"fast_gain": True},
     {"common_gain": 2, "internal_mass": True},
+    {"gain_schedule": "occupied", "noise": "zone"},
 ])
 def test_gradient_matches_finite_differences(sim5, net5, extra):
     data, opts = sim5

@@ -279,6 +279,11 @@ class EstimationOptions:
         (measured in docs/identification.md, "A busy room, or a disturbance rooms share":
         on the first testbed family, 14 days, recall 0.73 → 0.83 and false paths 0.67 →
         0.22 per building; on the twin house N2 the same 3 doors and no coupling).
+    gain_schedule : {None, "occupied"}
+        Kalman criteria, whole-building fits: ``occupied`` lets the random-walk gains
+        wander faster (a fitted ratio) in the occupied hours 7–19 h of every day than at
+        night (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`); None (default):
+        one intensity all day.
     common_gain : int
         Kalman criteria, whole-building fits: this many common gains, each a first-order
         process that heats every measured zone with its own fitted loading
@@ -328,6 +333,7 @@ class EstimationOptions:
     fast_gain: object = "auto"
     noise: str = "auto"
     common_gain: int = 0
+    gain_schedule: str | None = None
     input_timing: str = "auto"
     per_edge: object = "auto"
 
@@ -343,6 +349,7 @@ class EstimationOptions:
         _one_of("estimation", "input_timing", self.input_timing, INPUT_TIMINGS)
         _one_of("estimation", "innovations", self.innovations, ("gaussian", "student"))
         _one_of("estimation", "noise", self.noise, ("auto", "zone", "shared"))
+        _one_of("estimation", "gain_schedule", self.gain_schedule, (None, "occupied"))
         if self.fast_gain not in ("auto", True, False):
             raise DataError(f"identify option estimation.fast_gain must be 'auto', True or "
                             f"False (--fast-gain auto, on or off), found {self.fast_gain!r}")
@@ -351,7 +358,8 @@ class EstimationOptions:
             raise DataError(f"identify option estimation.common_gain must be an integer >= 0, "
                             f"found {self.common_gain!r}")
         for name, on in (("common_gain", bool(self.common_gain)),
-                         ("noise", self.noise == "zone")):
+                         ("noise", self.noise == "zone"),
+                         ("gain_schedule", self.gain_schedule is not None)):
             if on and self.criterion == "simulation":
                 raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
                                 "(likelihood or kstep), not 'simulation'")
@@ -1168,7 +1176,7 @@ def _fitted_network(gb):
 
 def _mass_options(opt) -> dict:
     """Likelihood options of ``estimation.internal_mass``, ``wall_factors``,
-    ``innovations``, ``fast_gain``, ``common_gain`` and ``noise``; with the factors
+    ``innovations``, ``fast_gain``, ``common_gain``, ``gain_schedule`` and ``noise``; with the factors
     and every row, since only rows with known supply heat fix a zone's capacity or a wall's
     UA (on the supply-off rows of the closed-loop testbed the capacity factor drifts to
     10–30 with or without extra mass)."""
@@ -1184,6 +1192,8 @@ def _mass_options(opt) -> dict:
         out["fast_gain"] = True
     if est.common_gain:
         out["common_gain"] = int(est.common_gain)
+    if est.gain_schedule is not None:
+        out["gain_schedule"] = est.gain_schedule
     if est.noise != "shared" and est.criterion != "simulation":   # "auto": per zone
         out["noise"] = "zone"
     return out

@@ -92,8 +92,9 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
         State matrix [1/s].
     B : casadi.MX or DM, shape (n, m)
         Input matrix [state unit per input unit per s].
-    Sigma : casadi.MX or DM, shape (n, n)
-        Diffusion (process noise intensity) [state unit² / s], symmetric PSD.
+    Sigma : casadi.MX or DM, shape (n, n), or a list of them
+        Diffusion (process noise intensity) [state unit² / s], symmetric PSD. A list gives
+        one ``Qd`` each (same ``Phi`` and ``Gamma``).
     dt : float
         Step [s].
     squarings : int
@@ -108,16 +109,18 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
         :math:`e^{A\,dt}`.
     Gamma : shape (n, m)
         :math:`\int_0^{dt} e^{As} ds\, B`.
-    Qd : shape (n, n)
+    Qd : shape (n, n), or a list
         :math:`\int_0^{dt} e^{As}\Sigma e^{A^T s} ds` (symmetrised).
     """
     n = A.shape[0]
     h = dt / 2.0 ** squarings
     mt = dense_mtimes if isinstance(A, ca.MX) else ca.mtimes
+    several = isinstance(Sigma, (list, tuple))
+    Sigmas = list(Sigma) if several else [Sigma]
+    P, G = A * h, B * h
     # Σ is diagonal in every model of this package: its products are row scalings (n²),
     # which CasADi's sparse product does; a dense Σ goes through BLAS like the rest
-    mts = ca.mtimes if Sigma.nnz() <= n else mt
-    P, G, S = A * h, B * h, Sigma * h
+    Ss = [(Sg * h, ca.mtimes if Sg.nnz() <= n else mt) for Sg in Sigmas]
     I = _eye(n)
     # The Taylor polynomial (Horner form) of two block matrices, by blocks:
     #   [[P, G], [0, 0]]     -> [[Phi, Gamma], [0, I]]
@@ -129,22 +132,26 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
     # 175 s instead of 187 s (279 instead of 303 CPU s), the same selection path. The
     # products go through BLAS (dense_mtimes): the blocks fill in after a few terms, and
     # CasADi's own loop was slower (twin house, 116 states: a gradient 0.128 → 0.095 s).
+    # Several Σ (the occupied-hours filter) share Phi and Gamma: one n×n product more per
+    # stage and two per squaring each.
     E = I + P / order
     Gm = G / order
-    F12 = S / order
+    F12s = [S / order for S, _ in Ss]
     for k in range(order - 1, 0, -1):
-        F12 = (mts(S, E.T) - mt(P, F12)) / k
+        F12s = [(mts(S, E.T) - mt(P, F12)) / k for (S, mts), F12 in zip(Ss, F12s)]
         Gm = (G + mt(P, Gm)) / k
         E = I + mt(P, E) / k
     Phi, Gam = E, Gm
-    Q = mt(Phi, F12)
-    Q = 0.5 * (Q + Q.T)
+    Qs = []
+    for F12 in F12s:
+        Q = mt(Phi, F12)
+        Qs.append(0.5 * (Q + Q.T))
     for _ in range(squarings):
-        Q = mt(mt(Phi, Q), Phi.T) + Q
+        Qs = [mt(mt(Phi, Q), Phi.T) + Q for Q in Qs]
         Gam = Gam + mt(Phi, Gam)
         Phi = mt(Phi, Phi)
-    Q = 0.5 * (Q + Q.T)
-    return Phi, Gam, Q
+    Qs = [0.5 * (Q + Q.T) for Q in Qs]
+    return Phi, Gam, (Qs if several else Qs[0])
 
 
 def discretize_np(A, B, Sigma, dt: float):
@@ -300,7 +307,7 @@ def stationary_filter(Phi, C, Qd, R, iterations: int = 40, dare=None):
     return P, S, Kf, change
 
 
-def chunked_recursion(F, GZ, starts, restart, L: int):
+def chunked_recursion(F, GZ, starts, restart, L: int, regime=None):
     r"""All states of ``x_{k+1} = F x_k + g_k`` with a few dozen dense matrix products.
 
     The time axis is cut into ``M`` chunks of ``L`` steps. Column ``j·M + c`` of ``GZ``
@@ -313,7 +320,8 @@ def chunked_recursion(F, GZ, starts, restart, L: int):
 
     Parameters
     ----------
-    F : casadi.MX, shape (n, n)
+    F : casadi.MX, shape (n, n) or (n, n·R)
+        With ``regime``: R matrices side by side.
     GZ : casadi.MX, shape (n, L·M)
         Forcing in the chunk layout.
     starts : casadi.MX, shape (n, n_segments)
@@ -323,6 +331,9 @@ def chunked_recursion(F, GZ, starts, restart, L: int):
         the previous one.
     L : int
         Chunk length.
+    regime : sequence of int, optional
+        ``regime[c]``: the matrix chunk ``c`` steps with (a filter whose gain switches with
+        the hour). Default: one matrix.
 
     Returns
     -------
@@ -331,7 +342,7 @@ def chunked_recursion(F, GZ, starts, restart, L: int):
     """
     if not len(restart) or restart[0] < 0:
         raise EstimationError("chunk layout: the first chunk must start a segment")
-    return linear_recursion(F, GZ, starts, restart, L)
+    return linear_recursion(F, GZ, starts, restart, L, regime)
 
 
 @dataclass

@@ -72,7 +72,10 @@ def filtered_states(problem, eta):
     """
     m = problem.matrices(eta)
     W = problem.inputs(eta)
-    Phi, Gam, Kf, C = m["Phi"], m["Gamma"], m["Kf"], problem.C
+    Phi, Gam, C = m["Phi"], m["Gamma"], problem.C
+    # the gain of each row's regime (one regime unless gain_schedule is set)
+    gains = (m["Kf"], m.get("Kf_occ", m["Kf"]))
+    reg = problem.row_regime
     out = []
     with single_thread_blas():
         for s, (a, b) in enumerate(problem.segments):
@@ -83,7 +86,7 @@ def filtered_states(problem, eta):
             for k in range(a, b):
                 e = problem.Y[k] - C @ x
                 Xp[k - a] = x
-                x = x + Kf @ e
+                x = x + gains[reg[k]] @ e
                 Xf[k - a] = x
                 E[k - a] = e
                 x = Phi @ x + Gam @ W[k]

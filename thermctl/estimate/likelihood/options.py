@@ -52,9 +52,22 @@ class LikelihoodOptions:
         the random walk every measured zone also gets a constant gain.
     harmonics : int
     occupied_hours : (float, float)
-        Local hours of the ``levels`` indicator [h].
+        Local hours of the ``levels`` indicator and of ``gain_schedule`` [h].
     weekdays_only : bool
         ``levels`` indicator on Monday–Friday only.
+    gain_schedule : {None, "occupied"}
+        ``occupied``: the random-walk gains wander faster in ``occupied_hours`` (every day,
+        weekends too): their noise intensity there is ``occ_ratio`` (fitted, shared, one
+        number) times the rest of the day's. People, their equipment and lights come and go
+        by the hour in those hours; at night a gain holds. With one intensity for the whole
+        day the filter must either follow the daytime jumps with a gain that also wanders at
+        night, or call them misfit that an air path to a neighbour with the same hours may
+        take up. The filter is stationary within each regime: a stationary Kalman gain and
+        innovation covariance per regime, switching at the hour nearest the schedule's
+        (each chunk of the recursion, 30 min or less, is in one regime), so the likelihood
+        is exact within a regime and approximate for the covariance's transient after a
+        switch (its time constant is that of the filter, minutes to an hour). Needs the
+        random-walk disturbance and timestamps. None (default): one intensity.
     solar : "auto", bool or list of str
         Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
         those zones; False = none.
@@ -177,6 +190,7 @@ class LikelihoodOptions:
     harmonics: int = 2
     occupied_hours: tuple = (7.0, 19.0)
     weekdays_only: bool = True
+    gain_schedule: str | None = None
     solar: object = "auto"
     noise: str = "shared"
     burn_in: float = 6 * 3600.0
@@ -225,6 +239,12 @@ class LikelihoodOptions:
                                   f"{self.disturbance!r}")
         if self.basis not in (None, "levels", "fourier"):
             raise EstimationError(f"basis must be None, 'levels' or 'fourier', found {self.basis!r}")
+        if self.gain_schedule not in (None, "occupied"):
+            raise EstimationError(f"gain_schedule must be None or 'occupied', found "
+                                  f"{self.gain_schedule!r}")
+        if self.gain_schedule is not None and self.disturbance != "random_walk":
+            raise EstimationError("gain_schedule needs disturbance='random_walk' (it scales the "
+                                  "random-walk gains' noise in occupied hours)")
         if self.noise not in ("shared", "zone"):
             raise EstimationError(f"noise must be 'shared' or 'zone', found {self.noise!r}")
         if self.initial_state not in ("steady", "paper"):

@@ -34,6 +34,7 @@ GROUP_UNITS = {
     "tau_g": "s",
     "loading": "W",
     "tau_c": "s",
+    "occ_ratio": "-",
 }
 """Unit of each parameter group."""
 

@@ -357,6 +357,9 @@ class LikelihoodProblem:
             else:
                 self.i_sphi = [lay.add(Param(f"sigma_phi[{z}]", "sigma_phi", True, s0, 1e-3, 1e3))
                                for z in mz]
+        self.i_occ = None       # occupied-hours ratio of the gains' noise intensity
+        if opt.gain_schedule is not None:
+            self.i_occ = lay.add(Param("occ_ratio", "occ_ratio", True, 2.0, 1e-2, 1e3))
         if self.n_b:
             self.i_sigb = lay.add(Param("sigma_b", "sigma_b", True, 0.2, 1e-3, 5.0))
             self.i_taub = lay.add(Param("tau_b", "tau_b", True, 3600.0, 300.0, 86400.0))
@@ -424,6 +427,15 @@ class LikelihoodProblem:
                 p.init = float(np.clip(v, p.lower, p.upper))
         self.layout = lay
 
+    def _occupied_rows(self) -> np.ndarray:
+        """Rows in the options' ``occupied_hours`` (every day), for ``gain_schedule``."""
+        t = self.data.time
+        if t is None:
+            raise DataError("gain_schedule='occupied' needs time stamps; the data has none")
+        hour = np.asarray(t.hour + t.minute / 60.0 + t.second / 3600.0, dtype=float)
+        h0, h1 = self.options.occupied_hours
+        return (hour >= h0) & (hour < h1) if h0 <= h1 else (hour >= h0) | (hour < h1)
+
     # ------------------------------------------------------------------ chunk layout
     def _make_chunks(self):
         opt, dt = self.options, self.data.dt
@@ -441,7 +453,13 @@ class LikelihoodProblem:
         self.segments = segs
         n_tot = sum(b - a for a, b in segs)
         L = 2 ** int(round(math.log2(max(math.sqrt(n_tot), 4.0))))
-        self.L = L = int(min(max(L, 8), 256))
+        L = int(min(max(L, 8), 256))
+        occ_rows = self._occupied_rows() if opt.gain_schedule is not None else None
+        if occ_rows is not None:
+            # a chunk is in one regime: at most 30 min (6 rows at 5 min, 3 at 10 min), so
+            # a regime switches within a quarter of an hour of the schedule's hour
+            L = max(1, min(L, int(1800.0 // dt)))
+        self.L = L
         chunk_seg, chunk_off = [], []
         for s, (a, b) in enumerate(segs):
             for o in range(0, b - a, L):
@@ -450,6 +468,17 @@ class LikelihoodProblem:
         M = len(chunk_seg)
         self.M = M
         self.restart = [s if o == 0 else -1 for s, o in zip(chunk_seg, chunk_off)]
+        self.regime = None                      # regime (0 or 1) of every chunk
+        self.row_regime = np.zeros(len(self.valid), dtype=int)
+        if occ_rows is not None:
+            reg = []
+            for s_, o in zip(chunk_seg, chunk_off):
+                a, b = segs[s_]
+                rows = np.arange(a + o, min(a + o + L, b))
+                r = int(occ_rows[rows].mean() > 0.5)
+                reg.append(r)
+                self.row_regime[rows] = r
+            self.regime = reg
         tmap = np.full(L * M, -1, dtype=int)       # data row of each layout column
         first = np.zeros(L * M, dtype=int)
         for c, (s, o) in enumerate(zip(chunk_seg, chunk_off)):
@@ -674,7 +703,18 @@ class LikelihoodProblem:
         eta = ca.MX.sym("eta", npar)
         A, B, Sig, R = self._continuous(eta)
         self.squarings = kalman.n_squarings(self._norm_bound())
-        Phi, Gam, Qd = kalman.discretize(A, B, Sig, self.data.dt, self.squarings)
+        sched = self.regime is not None
+        if sched:
+            # the gains' share of Σ (the random-walk block), discretised beside Σ itself:
+            # Qd in occupied hours = Qd + (ratio − 1)·Qd_gains
+            gsel = np.zeros(self.n)
+            gsel[self.n_net:self.n_net + self.n_d] = 1.0
+            Sig_g = ca.diag(ca.diag(Sig) * ca.DM(gsel))
+            Phi, Gam, (Qd, Qd_g) = kalman.discretize(A, B, [Sig, Sig_g], self.data.dt,
+                                                     self.squarings)
+            Qd_occ = Qd + (ca.exp(eta[self.i_occ]) - 1.0) * Qd_g
+        else:
+            Phi, Gam, Qd = kalman.discretize(A, B, Sig, self.data.dt, self.squarings)
         C = np.zeros((self.ny, self.n))
         C[np.arange(self.ny), self.meas] = 1.0
         if self.n_e:
@@ -693,11 +733,37 @@ class LikelihoodProblem:
         F = Phi - ca.mtimes(PhiK, C)
         ThB_full = ca.vertcat(ThB, ca.MX(self.nb, ThB.shape[1]))
         W = ca.DM(self.W0_lay) + _KW * ca.mtimes(ThB_full, ca.DM(self.B_lay))
-        GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay))
-        X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L)
+        occ_extra = []
+        if sched:
+            # a second stationary filter for the occupied hours; each chunk runs on its
+            # regime's gain, each column's innovation is scored with its regime's S
+            P1, S1, Kf1, _ = kalman.stationary_filter(Phi, C, Qd_occ, R,
+                                                      self.options.sda_iterations, self._dare)
+            PhiK1 = ca.mtimes(Phi, Kf1)
+            cols1 = np.tile(np.asarray(self.regime, dtype=float), self.L)   # column j·M + c
+            GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay * (1.0 - cols1))) \
+                + dense_mtimes(PhiK1, ca.DM(self.Y_lay * cols1))
+            F = ca.horzcat(F, Phi - ca.mtimes(PhiK1, C))
+            X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L, self.regime)
+            occ_extra = [P1, S1, Kf1, Qd_occ]
+        else:
+            GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay))
+            X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L)
         E = ca.DM(self.Y_lay) - ca.mtimes(C, X)
         Em = E * ca.DM(np.tile(self.mask, (self.ny, 1)))
-        quad_cols = ca.sum1(Em * ca.solve(S, Em))                         # (1, L·M)
+        if sched:
+            E0 = Em * ca.DM(np.tile(1.0 - cols1, (self.ny, 1)))
+            E1 = Em * ca.DM(np.tile(cols1, (self.ny, 1)))
+            quad_cols = ca.sum1(E0 * ca.solve(S, E0)) + ca.sum1(E1 * ca.solve(S1, E1))
+            m1 = self.mask * cols1
+            # log det S per counted column, of its own regime
+            ldet_row = ca.DM(self.mask - m1).T * ca.log(ca.det(S)) + ca.DM(m1).T * ca.log(ca.det(S1))
+            ldet_sum = float((self.mask - m1).sum()) * ca.log(ca.det(S)) \
+                + float(m1.sum()) * ca.log(ca.det(S1))
+        else:
+            quad_cols = ca.sum1(Em * ca.solve(S, Em))                         # (1, L·M)
+            ldet_row = ca.DM(self.mask).T * ca.log(ca.det(S))
+            ldet_sum = self.n_cols * ca.log(ca.det(S))
         mask_row = ca.DM(self.mask).T
         if self.options.innovations == "student":
             # multivariate t, scale S: a masked column has e = 0 and adds log(1) = 0
@@ -713,8 +779,8 @@ class LikelihoodProblem:
         else:
             const = self.ny * kalman.LOG2PI
         quad = ca.sum2(quad_cols)
-        nll = 0.5 * (quad + self.n_cols * (ca.log(ca.det(S)) + const))
-        self._col_terms = 0.5 * (quad_cols + mask_row * (ca.log(ca.det(S)) + const))
+        nll = 0.5 * (quad + ldet_sum + self.n_cols * const)
+        self._col_terms = 0.5 * (quad_cols + ldet_row + mask_row * const)
         self._eta = eta
         self._nll = nll
         self.nll_fn = ca.Function("nll", [eta], [nll], ["eta"], ["nll"])
@@ -724,12 +790,13 @@ class LikelihoodProblem:
         self._nll_buf = BufferedFunction(self.nll_fn)
         self._nll_grad_buf = BufferedFunction(self.nll_grad_fn)
         self.matrices_fn = ca.Function(
-            "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change],
+            "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change] + occ_extra,
             ["eta"], ["A", "B", "Sigma", "R", "Phi", "Gamma", "Qd", "P", "S", "Kf", "X0",
-                      "Theta", "change"])
+                      "Theta", "change"] + (["P_occ", "S_occ", "Kf_occ", "Qd_occ"] if sched else []))
         self._hess = {}
         self._kstep_expr = None
-        self._kstep_parts = (X, E, Kf, Phi, Gam, C, ThB_full) if self.n_restarts else None
+        self._kstep_parts = (X, E, (Kf, Kf1) if sched else Kf, Phi, Gam, C, ThB_full) \
+            if self.n_restarts else None
 
     @property
     def _kstep(self):
@@ -756,7 +823,14 @@ class LikelihoodProblem:
         R = self.n_restarts
         rows = np.array([self.pos[int(t)] for t in self.kstarts])
         Sel = ca.DM(sp.csc_matrix((np.ones(R), (rows, np.arange(R))), shape=(LM, R)))
-        Xh = ca.mtimes(X, Sel) + ca.mtimes(Kf, ca.mtimes(E, Sel))
+        if isinstance(Kf, tuple):
+            # each restart's filtered state with the gain of its row's regime
+            r1 = self.row_regime[self.kstarts].astype(float)
+            ES = ca.mtimes(E, Sel)
+            Xh = ca.mtimes(X, Sel) + ca.mtimes(Kf[0], ES * ca.DM(np.tile(1.0 - r1, (self.ny, 1)))) \
+                + ca.mtimes(Kf[1], ES * ca.DM(np.tile(r1, (self.ny, 1))))
+        else:
+            Xh = ca.mtimes(X, Sel) + ca.mtimes(Kf, ca.mtimes(E, Sel))
         J = 0
         Sz = np.zeros((self.nw, self.ny))
         Sz[self.meas, np.arange(self.ny)] = 1.0
