@@ -49,18 +49,18 @@ def test_shapes_checked():
 
 def _sequential(F, G, S, restart, L, regime=None):
     """x_{k+1} = F x_k + g_k step by step in time order (MX), from the chunk layout; with
-    ``regime``, chunk c steps with ``F[:, r·n:(r+1)·n]``, r = regime[c]."""
+    ``regime``, the step out of column k by ``F[:, r·n:(r+1)·n]``, r = regime[k]."""
     n, M = F.shape[0], len(restart)
     cols = [None] * (L * M)
     x = None
     for c in range(M):
-        r = 0 if regime is None else regime[c]
-        Fc = F[:, r * n:(r + 1) * n]
         for j in range(L):
+            k = j * M + c
+            r = 0 if regime is None else regime[k]
             if j == 0 and restart[c] >= 0:
                 x = S[:, restart[c]]
-            cols[j * M + c] = x
-            x = ca.mtimes(Fc, x) + G[:, j * M + c]
+            cols[k] = x
+            x = ca.mtimes(F[:, r * n:(r + 1) * n], x) + G[:, k]
     return ca.horzcat(*cols)
 
 
@@ -88,15 +88,21 @@ def test_recursion_matches_step_by_step(L, restart):
         np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
 
 
-@pytest.mark.parametrize("L,restart,regime", [(4, [0, -1, -1, 1, -1, 2], [0, 1, 1, 0, 1, 0]),
-                                              (1, [0, -1, 1], [1, 0, 1]),
-                                              (3, [0, -1, -1, -1], [0, 2, 1, 2])])
-def test_switched_recursion_matches_step_by_step(L, restart, regime):
-    """One matrix per chunk (the occupied-hours filter): values, gradients, Hessians and
+@pytest.mark.parametrize("L,restart,chunks", [
+    (4, [0, -1, -1, 1, -1, 2], [0, 1, 1, 0, 1, 0]),     # one regime per chunk
+    (4, [0, -1, -1, 1, -1, 2], None),                   # regimes changing within chunks
+    (1, [0, -1, 1], [1, 0, 1]),
+    (3, [0, -1, -1, -1], None)])
+def test_switched_recursion_matches_step_by_step(L, restart, chunks):
+    """One matrix per step (the occupied-hours filter): values, gradients, Hessians and
     forward Jacobians equal those of the step-by-step recursion, to 1e-11."""
     from thermctl.estimate.likelihood._dense import linear_recursion
     rng = np.random.default_rng(10 + L)
     n, M = 3, len(restart)
+    if chunks is not None:
+        regime = list(np.tile(chunks, L))          # column j·M + c is in chunk c
+    else:
+        regime = list(rng.integers(0, 3, L * M))
     R = max(regime) + 1
     nseg = max(restart) + 1
     x = ca.MX.sym("x", 3)

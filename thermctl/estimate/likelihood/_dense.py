@@ -157,26 +157,26 @@ def linear_recursion(F, GZ, starts, restart, L: int, regime=None):
     starts : casadi.MX, shape (n, n_segments)
     restart : sequence of int, length M
     L : int
-    regime : sequence of int, length M, optional
-        ``regime[c]``: the matrix every step of chunk ``c`` uses (the step out of its last
-        column into chunk ``c + 1`` included). Default: one matrix.
+    regime : sequence of int, length L·M, optional
+        ``regime[k]``: the matrix of the step out of column ``k`` (chunk layout; a regime
+        may change within a chunk). Default: one matrix.
 
     Returns
     -------
     casadi.MX, shape (n, L·M)
     """
-    reg = _regime_key(regime, len(restart))
+    reg = _regime_key(regime, L * len(restart))
     cb = _cached(("rec", F.shape[0], L, tuple(restart), starts.shape[1], reg), _Recursion)
     return cb(ca.densify(F), ca.densify(GZ), ca.densify(starts))
 
 
-def _regime_key(regime, M: int):
-    """``regime`` as a tuple of M ints, or None for a single matrix."""
+def _regime_key(regime, LM: int):
+    """``regime`` as a tuple of L·M ints, or None for a single matrix."""
     if regime is None:
         return None
     reg = tuple(int(r) for r in regime)
-    if len(reg) != M:
-        raise ValueError(f"regime: {len(reg)} entries for {M} chunks")
+    if len(reg) != LM:
+        raise ValueError(f"regime: {len(reg)} entries for {LM} columns")
     if min(reg) < 0:
         raise ValueError("regime: indices must be >= 0")
     return None if max(reg) == 0 else reg
@@ -186,11 +186,38 @@ def _n_regimes(reg) -> int:
     return 1 if reg is None else max(reg) + 1
 
 
-def _column_masks(reg, L: int):
-    """Per regime, the sparse diagonal (L·M, L·M) selecting the columns of its chunks."""
-    M = len(reg)
-    cols = np.tile(np.asarray(reg), L)        # column j·M + c belongs to chunk c
+def _column_masks(reg):
+    """Per regime, the sparse diagonal selecting its columns."""
+    cols = np.asarray(reg)
     return [ca.DM(sp.diags((cols == r).astype(float)).tocsc()) for r in range(_n_regimes(reg))]
+
+
+def _step_groups(F, reg, M: int, L: int, transpose: bool = False):
+    """Per step j of a chunk: ``[(F_r, chunks whose column (c, j) is in regime r), ...]``,
+    and per chunk its single regime or -1 where it changes within the chunk."""
+    n = F.shape[0]
+    Fs = _split(F, n, _n_regimes(reg))
+    if transpose:
+        Fs = [Fr.T for Fr in Fs]
+    R3 = np.asarray(reg).reshape((M, L), order="F")          # [c, j] = reg[j·M + c]
+    groups = []
+    for j in range(L):
+        g = [(Fs[r], np.flatnonzero(R3[:, j] == r)) for r in range(len(Fs))]
+        g = [(Fr, idx) for Fr, idx in g if len(idx)]
+        groups.append(g[0][0] if len(g) == 1 else g)          # one regime: no indexing
+        # (a bare matrix where every chunk is in one regime at step j)
+    pure = np.where((R3 == R3[:, :1]).all(axis=1), R3[:, 0], -1)
+    return Fs, R3, groups, pure
+
+
+def _apply(group, A):
+    """``F_r A`` column by column in their regimes (``group`` from :func:`_step_groups`)."""
+    if isinstance(group, np.ndarray):
+        return group @ A
+    B = np.empty_like(A)
+    for Fr, idx in group:
+        B[:, idx] = Fr @ A[:, idx]
+    return B
 
 
 def _split(F, n: int, R: int):
@@ -215,7 +242,7 @@ def _per_regime_outer(Gb, X, masks):
 def _adjoint(F, Xb, restart, L: int, regime=None):
     """``Ḡ`` of :func:`linear_recursion` for the output seed ``Xb`` (see :class:`_Adjoint`)."""
     n = F.shape[0]
-    cb = _cached(("adj", n, L, tuple(restart), _regime_key(regime, len(restart))), _Adjoint)
+    cb = _cached(("adj", n, L, tuple(restart), _regime_key(regime, L * len(restart))), _Adjoint)
     return cb(ca.densify(F), ca.densify(Xb))
 
 
@@ -260,21 +287,18 @@ def _rec_np(F, G, S, restart, L, out, regime=None):
 
 
 def _rec_np_regimes(F, G, S, restart, L, out, regime):
-    """:func:`_rec_np` with one matrix per chunk, ``F[:, r·n:(r+1)·n]`` for ``regime[c] = r``:
-    the same three passes, each regime's chunks multiplied together."""
+    """:func:`_rec_np` with the step out of column ``k`` by ``F[:, r·n:(r+1)·n]``,
+    ``r = regime[k]``: the same three passes, each step's columns grouped by regime; the
+    chain through a chunk whose regime changes goes step by step."""
     n, M = F.shape[0], len(restart)
-    reg = np.asarray(regime)
-    Fs = _split(F, n, _n_regimes(regime))
-    groups = [(Fr, np.flatnonzero(reg == r)) for r, Fr in enumerate(Fs)]
-    groups = [(Fr, idx) for Fr, idx in groups if len(idx)]
+    Fs, R3, groups, pure = _step_groups(F, regime, M, L)
     G3 = G.reshape((n, M, L), order="F")
     X = out.reshape((n, M, L), order="F")
     X[:, :, 0] = 0.0
     last = np.zeros((n, M))
     for j in range(L):
         nxt = X[:, :, j + 1] if j + 1 < L else last
-        for Fr, idx in groups:
-            nxt[:, idx] = Fr @ X[:, idx, j]
+        nxt[:] = _apply(groups[j], X[:, :, j])
         nxt += G3[:, :, j]
     FL = [np.linalg.matrix_power(Fr, L) for Fr in Fs]
     H = np.empty((n, M), order="F")
@@ -283,33 +307,28 @@ def _rec_np_regimes(F, G, S, restart, L, out, regime):
         if restart[c] >= 0:
             x = S[:, restart[c]]
         H[:, c] = x
-        x = FL[reg[c]] @ x + last[:, c]
+        if pure[c] >= 0:
+            x = FL[pure[c]] @ x
+        else:
+            for j in range(L):
+                x = Fs[R3[c, j]] @ x
+        x = x + last[:, c]
     for j in range(L):
         X[:, :, j] += H
         if j + 1 < L:
-            for Fr, idx in groups:
-                H[:, idx] = Fr @ H[:, idx]
+            H = _apply(groups[j], H)
 
 
 def _adj_np(F, Xb, restart, L, out, regime=None):
     """numpy kernel of the adjoint into ``out``: ``Ḡ_k = λ_{k+1}`` where the step k → k+1
-    exists, else 0, with ``λ_k = X̄_k + Fᵀ λ_{k+1}`` backward in each segment (``F`` of the
-    chunk of step k where there are regimes)."""
+    exists, else 0, with ``λ_k = X̄_k + Fᵀ λ_{k+1}`` backward in each segment (with regimes,
+    ``F`` of column k's regime)."""
     n, M = F.shape[0], len(restart)
-    reg = np.zeros(M, dtype=int) if regime is None else np.asarray(regime)
-    FTs = [Fr.T for Fr in _split(F, n, _n_regimes(regime))]
-    groups = [(FT, np.flatnonzero(reg == r)) for r, FT in enumerate(FTs)]
-    groups = [(FT, idx) for FT, idx in groups if len(idx)]
-    single = len(groups) == 1 and len(groups[0][1]) == M
-
-    def step(FT_groups, A):
-        if single:
-            return FT_groups[0][0] @ A
-        B = np.empty_like(A)
-        for FT, idx in FT_groups:
-            B[:, idx] = FT @ A[:, idx]
-        return B
-
+    if regime is None:
+        FT = F.T
+        FTs, R3, groups, pure = [FT], None, [FT] * L, np.zeros(M, dtype=int)
+    else:
+        FTs, R3, groups, pure = _step_groups(F, regime, M, L, transpose=True)
     Xb3 = Xb.reshape((n, M, L), order="F")
     Gb = out.reshape((n, M, L), order="F")
     # λ within each chunk with nothing coming in: λ_{c,j} is stored at Gb[:, c, j − 1]
@@ -317,7 +336,7 @@ def _adj_np(F, Xb, restart, L, out, regime=None):
     first = np.empty((n, M))
     for j in range(L - 1, 0, -1):
         Gb[:, :, j - 1] = acc
-        acc = step(groups, acc)
+        acc = _apply(groups[j - 1], acc)
         acc += Xb3[:, :, j - 1]
     first[:] = acc                                   # λ_{c,0} of the chunk alone
     FLT = [np.linalg.matrix_power(FT, L) for FT in FTs]
@@ -326,12 +345,18 @@ def _adj_np(F, Xb, restart, L, out, regime=None):
     for c in range(M - 1, -1, -1):
         if c + 1 < M and restart[c + 1] < 0:
             mu[:, c] = nxt
-        nxt = first[:, c] + FLT[reg[c]] @ mu[:, c]
+        if pure[c] >= 0:
+            v = FLT[pure[c]] @ mu[:, c]
+        else:
+            v = mu[:, c]
+            for j in range(L - 1, -1, -1):
+                v = FTs[R3[c, j]] @ v
+        nxt = first[:, c] + v
     # add what comes in from the next chunk: λ_{c,j} += (Fᵀ)^{L−j} μ_c
     Gb[:, :, L - 1] = mu
     Hb = mu
     for j in range(L - 1, 0, -1):
-        Hb = step(groups, Hb)
+        Hb = _apply(groups[j], Hb)
         Gb[:, :, j - 1] += Hb
 
 
@@ -349,7 +374,7 @@ class _Recursion(_DenseCallback):
         self.M = len(restart)
         self.regime = regime
         self.R = _n_regimes(regime)
-        self.masks = None if regime is None else _column_masks(regime, L)
+        self.masks = None if regime is None else _column_masks(regime)
         sel = np.zeros((self.M, nseg))
         for c, s in enumerate(self.restart):
             if s >= 0:
@@ -384,11 +409,8 @@ class _Recursion(_DenseCallback):
         F, GZ, S, X = self._syms()
         Xb = ca.MX.sym("Xb", n, LM * nadj)
         Fb, Gb, Sb = [], [], []
-        if self.masks is None:
-            head = None
-        else:   # the regime of each chunk's first column
-            head = [ca.DM(sp.diags((np.asarray(self.regime) == r).astype(float)).tocsc())
-                    for r in range(self.R)]
+        # the regime of each chunk's first column (columns 0..M−1)
+        head = None if self.masks is None else _column_masks(self.regime[:M])
         for i in range(nadj):
             xb = Xb[:, i * LM:(i + 1) * LM]
             gb = _adjoint(F, xb, self.restart, self.L, self.regime)
@@ -420,7 +442,7 @@ class _Adjoint(_DenseCallback):
         self.M = len(restart)
         self.regime = regime
         self.R = _n_regimes(regime)
-        self.masks = None if regime is None else _column_masks(regime, L)
+        self.masks = None if regime is None else _column_masks(regime)
         self.nseg = max(max(self.restart) + 1, 1)
         self.ins, self.out = ((n, n * self.R), (n, L * self.M)), (n, L * self.M)
         self._construct(f"recursion_adj_{n}x{L}x{self.M}_{id(self):x}")

@@ -63,11 +63,10 @@ class LikelihoodOptions:
         day the filter must either follow the daytime jumps with a gain that also wanders at
         night, or call them misfit that an air path to a neighbour with the same hours may
         take up. The filter is stationary within each regime: a stationary Kalman gain and
-        innovation covariance per regime, switching at the hour nearest the schedule's
-        (each chunk of the recursion, 30 min or less, is in one regime), so the likelihood
-        is exact within a regime and approximate for the covariance's transient after a
-        switch (its time constant is that of the filter, minutes to an hour). Needs the
-        random-walk disturbance and timestamps. None (default): one intensity.
+        innovation covariance per regime, switching at the schedule's hours, so the
+        likelihood is exact within a regime and approximate for the covariance's transient
+        after a switch (its time constant is that of the filter, minutes to an hour). Needs
+        the random-walk disturbance and timestamps. None (default): one intensity.
     solar : "auto", bool or list of str
         Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
         those zones; False = none.
