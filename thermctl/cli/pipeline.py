@@ -128,6 +128,11 @@ def identify(
                                     help="Kalman criteria, whole-building fits: this many "
                                     "common gains (a first-order disturbance every measured "
                                     "zone feels, each zone with its own fitted loading)."),
+    gain_schedule: str = typer.Option(_D.estimation.gain_schedule or "none", "--gain-schedule",
+                                      help="Kalman criteria, whole-building fits: occupied = "
+                                      "the gains wander faster (a fitted ratio) in the hours "
+                                      "7-19 of every day than at night; none = one pace all "
+                                      "day."),
     input_timing: str = typer.Option(_D.estimation.input_timing, "--input-timing",
                                      help="How a row's inputs act on the step after it: held "
                                      "(as logged: samples a controller holds), centred (the "
@@ -269,6 +274,8 @@ def identify(
                                      innovations=innovations,
                                      fast_gain=_FAST_GAIN.get(fast_gain, fast_gain),
                                      noise=noise, common_gain=common_gain,
+                                     gain_schedule=None if gain_schedule == "none"
+                                     else gain_schedule,
                                      input_timing=input_timing,
                                      per_edge="auto" if per_edge is None else per_edge),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
