@@ -83,6 +83,7 @@ from thermctl.testbed import generate
 RESULTS = Path(__file__).resolve().parent / "results"
 GLOBAL_MAX_ZONES = 13          # --global-too: buildings with at most this many zones
 LOCAL_CANDIDATES = SplitOptions().candidates   # --local-candidates (the default of identify)
+GAIN_SCHEDULE = SplitOptions().gain_schedule    # --gain-schedule
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -212,7 +213,8 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
     row = Row(label, zones, len(spec.measured_zones), scale, workers if scale == "local" else None)
     opt = IdentifyOptions(estimation=EstimationOptions(intervals="none"),
                           split=SplitOptions(scale=scale, workers=workers,
-                                             candidates=LOCAL_CANDIDATES))
+                                             candidates=LOCAL_CANDIDATES,
+                                             gain_schedule=GAIN_SCHEDULE))
     last = {"t": 0.0}
     t_start = time.perf_counter()
 
@@ -443,9 +445,13 @@ def main(argv=None) -> Result:
                     help="the testbed's control step [min] (default 1: the VAV boxes act "
                          "between the 5-min samples; 5: at the data step, the logged inputs "
                          "are what the plant got; labels get ' ctrl M')")
+    ap.add_argument("--gain-schedule", choices=("occupied",), default=None,
+                    help="split.gain_schedule: the local fits' gains wander faster in "
+                         "occupied hours")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
     args = ap.parse_args(argv)
     globals()["LOCAL_CANDIDATES"] = args.local_candidates
+    globals()["GAIN_SCHEDULE"] = args.gain_schedule
     if args.quick:
         args.zones, args.days, args.workers = [9], 4.0, [1, 2]
     # the library's log lines (one per local problem) would interleave with the table
