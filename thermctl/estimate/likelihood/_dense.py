@@ -187,9 +187,18 @@ def _n_regimes(reg) -> int:
 
 
 def _column_masks(reg):
-    """Per regime, the sparse diagonal selecting its columns."""
+    """Per regime with columns, ``(r, Sel_r)``: the sparse (len(reg), n_r) selection of its
+    columns (a gather; ``Sel_rᵀ`` scatters back). Products then run on each regime's columns
+    only: one full product's flops in all, where diagonal masks cost one per regime."""
     cols = np.asarray(reg)
-    return [ca.DM(sp.diags((cols == r).astype(float)).tocsc()) for r in range(_n_regimes(reg))]
+    out = []
+    for r in range(_n_regimes(reg)):
+        idx = np.flatnonzero(cols == r)
+        if len(idx):
+            sel = sp.csc_matrix((np.ones(len(idx)), (idx, np.arange(len(idx)))),
+                                shape=(len(cols), len(idx)))
+            out.append((r, ca.DM(sel)))
+    return out
 
 
 def _step_groups(F, reg, M: int, L: int, transpose: bool = False):
@@ -229,14 +238,17 @@ def _per_regime(dF, Y, masks, n):
     """``Σ_r dF_r (Y D_r)``: each column of ``Y`` times its own regime's block of ``dF``."""
     if masks is None:
         return dense_mtimes(dF, Y)
-    return sum(dense_mtimes(dF[:, r * n:(r + 1) * n], ca.mtimes(Y, D)) for r, D in enumerate(masks))
+    return sum(ca.mtimes(dense_mtimes(dF[:, r * n:(r + 1) * n], ca.mtimes(Y, S)), S.T)
+               for r, S in masks)
 
 
-def _per_regime_outer(Gb, X, masks):
-    """``[(Ḡ D_0) Xᵀ, (Ḡ D_1) Xᵀ, ...]``: the derivative of each regime's block."""
+def _per_regime_outer(Gb, X, masks, R: int):
+    """``[(Ḡ D_0) Xᵀ, (Ḡ D_1) Xᵀ, ...]``: the derivative of each of the R regime blocks."""
     if masks is None:
         return dense_mtimes(Gb, X.T)
-    return ca.horzcat(*[dense_mtimes(ca.mtimes(Gb, D), X.T) for D in masks])
+    n = Gb.shape[0]
+    blocks = {r: dense_mtimes(ca.mtimes(Gb, S), ca.mtimes(X, S).T) for r, S in masks}
+    return ca.densify(ca.horzcat(*[blocks.get(r, ca.MX(n, n)) for r in range(R)]))
 
 
 def _adjoint(F, Xb, restart, L: int, regime=None):
@@ -414,7 +426,7 @@ class _Recursion(_DenseCallback):
         for i in range(nadj):
             xb = Xb[:, i * LM:(i + 1) * LM]
             gb = _adjoint(F, xb, self.restart, self.L, self.regime)
-            Fb.append(_per_regime_outer(gb, X, self.masks))
+            Fb.append(_per_regime_outer(gb, X, self.masks, self.R))
             Gb.append(gb)
             # λ at a chunk's first step (columns 0..M−1): X̄ there plus Fᵀ λ one step on
             FTg = _per_regime(_transposed_blocks(F, n, self.R), gb[:, :M], head, n)
@@ -475,7 +487,7 @@ class _Adjoint(_DenseCallback):
         for i in range(nadj):
             nu = linear_recursion(F, Gbb[:, i * LM:(i + 1) * LM], zero, self.restart, self.L,
                                   self.regime)
-            Fb.append(_per_regime_outer(Gb, nu, self.masks))
+            Fb.append(_per_regime_outer(Gb, nu, self.masks, self.R))
             Xbb.append(nu)
         return ca.Function(name, [F, Xb, Gb, Gbb], [ca.horzcat(*Fb), ca.horzcat(*Xbb)],
                            inames, onames, opts)
