@@ -78,14 +78,22 @@ def test_recursion_matches_step_by_step(L, restart):
     S = ca.DM(rng.normal(size=(n, nseg))) * (1 + x[2] ** 2)
     W = ca.DM(rng.normal(size=(n, L * M)))
     x0 = rng.normal(size=3)
+    _assert_same_to_second_order(x, x0, W, linear_recursion(F, G, S, restart, L),
+                                 _sequential(F, G, S, restart, L))
+
+
+def _assert_same_to_second_order(x, x0, W, *Xs):
+    """The recursions ``Xs`` (MX in ``x``): equal values, gradients, Hessians and forward
+    Jacobians of a scalar of them at ``x0``, to 1e-11; returns the first one's value."""
     out = []
-    for X in (linear_recursion(F, G, S, restart, L), _sequential(F, G, S, restart, L)):
+    for X in Xs:
         f = ca.sum1(ca.sum2(W * X)) + ca.sumsqr(X) / 7
         H, g = ca.hessian(f, x)
         J = ca.jacobian(ca.vec(X), x)
         out.append([np.asarray(v) for v in ca.Function("f", [x], [X, f, g, H, J])(x0)])
     for a, b in zip(*out):
         np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
+    return out[0][0]
 
 
 @pytest.mark.parametrize("L,restart,chunks", [
@@ -114,18 +122,11 @@ def test_switched_recursion_matches_step_by_step(L, restart, chunks):
     S = ca.DM(rng.normal(size=(n, nseg))) * (1 + x[2] ** 2)
     W = ca.DM(rng.normal(size=(n, L * M)))
     x0 = rng.normal(size=3)
-    out = []
-    for X in (linear_recursion(F, G, S, restart, L, regime),
-              _sequential(F, G, S, restart, L, regime)):
-        f = ca.sum1(ca.sum2(W * X)) + ca.sumsqr(X) / 7
-        H, g = ca.hessian(f, x)
-        J = ca.jacobian(ca.vec(X), x)
-        out.append([np.asarray(v) for v in ca.Function("f", [x], [X, f, g, H, J])(x0)])
-    for a, b in zip(*out):
-        np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
-    # and the regimes matter: with every chunk on matrix 0 the states differ
+    X1 = _assert_same_to_second_order(x, x0, W, linear_recursion(F, G, S, restart, L, regime),
+                                      _sequential(F, G, S, restart, L, regime))
+    # and the regimes matter: with every step on matrix 0 the states differ
     X0 = ca.Function("x", [x], [linear_recursion(F[:, :n], G, S, restart, L)])(x0)
-    assert np.abs(np.asarray(X0) - out[0][0]).max() > 1e-3
+    assert np.abs(np.asarray(X0) - X1).max() > 1e-3
 
 
 @pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="glibc only")

@@ -208,6 +208,8 @@ def _step_groups(F, reg, M: int, L: int, transpose: bool = False):
     Fs = _split(F, n, _n_regimes(reg))
     if transpose:
         Fs = [Fr.T for Fr in Fs]
+    if reg is None:
+        return Fs, None, [Fs[0]] * L, np.zeros(M, dtype=int)
     R3 = np.asarray(reg).reshape((M, L), order="F")          # [c, j] = reg[j·M + c]
     groups = []
     for j in range(L):
@@ -219,11 +221,11 @@ def _step_groups(F, reg, M: int, L: int, transpose: bool = False):
     return Fs, R3, groups, pure
 
 
-def _apply(group, A):
+def _apply(group, A, out=None):
     """``F_r A`` column by column in their regimes (``group`` from :func:`_step_groups`)."""
     if isinstance(group, np.ndarray):
-        return group @ A
-    B = np.empty_like(A)
+        return np.matmul(group, A, out=out)
+    B = np.empty_like(A) if out is None else out
     for Fr, idx in group:
         B[:, idx] = Fr @ A[:, idx]
     return B
@@ -269,10 +271,12 @@ def _cached(key, cls):
 
 def _rec_np(F, G, S, restart, L, out, regime=None):
     """numpy kernel of :func:`linear_recursion` into ``out``; ``G`` and ``out`` are (n, L·M)
-    column-major chunk layouts, viewed as (n, M, L) so that every step is one contiguous block."""
+    column-major chunk layouts, viewed as (n, M, L) so that every step is one contiguous block.
+    With ``regime`` the step out of column ``k`` is by ``F[:, r·n:(r+1)·n]``,
+    ``r = regime[k]``: each step's columns grouped by regime, and the chain through a chunk
+    whose regime changes goes step by step."""
     n, M = F.shape[0], len(restart)
-    if regime is not None:
-        return _rec_np_regimes(F, G, S, restart, L, out, regime)
+    Fs, R3, groups, pure = _step_groups(F, regime, M, L)
     G3 = G.reshape((n, M, L), order="F")           # [i, c, j] = G[i, j·M + c]
     X = out.reshape((n, M, L), order="F")
     # pass 1: every chunk from zero (X[:, :, j] holds that partial state for now)
@@ -280,38 +284,9 @@ def _rec_np(F, G, S, restart, L, out, regime=None):
     last = np.zeros((n, M))
     for j in range(L):
         nxt = X[:, :, j + 1] if j + 1 < L else last
-        np.matmul(F, X[:, :, j], out=nxt)
+        _apply(groups[j], X[:, :, j], out=nxt)
         nxt += G3[:, :, j]
     # chain the chunk starts
-    FL = np.linalg.matrix_power(F, L)
-    H = np.empty((n, M), order="F")
-    x = None
-    for c in range(M):
-        if restart[c] >= 0:
-            x = S[:, restart[c]]
-        H[:, c] = x
-        x = FL @ x + last[:, c]
-    # pass 2: add F^j x_{c,0}
-    for j in range(L):
-        X[:, :, j] += H
-        if j + 1 < L:
-            H = F @ H
-
-
-def _rec_np_regimes(F, G, S, restart, L, out, regime):
-    """:func:`_rec_np` with the step out of column ``k`` by ``F[:, r·n:(r+1)·n]``,
-    ``r = regime[k]``: the same three passes, each step's columns grouped by regime; the
-    chain through a chunk whose regime changes goes step by step."""
-    n, M = F.shape[0], len(restart)
-    Fs, R3, groups, pure = _step_groups(F, regime, M, L)
-    G3 = G.reshape((n, M, L), order="F")
-    X = out.reshape((n, M, L), order="F")
-    X[:, :, 0] = 0.0
-    last = np.zeros((n, M))
-    for j in range(L):
-        nxt = X[:, :, j + 1] if j + 1 < L else last
-        nxt[:] = _apply(groups[j], X[:, :, j])
-        nxt += G3[:, :, j]
     FL = [np.linalg.matrix_power(Fr, L) for Fr in Fs]
     H = np.empty((n, M), order="F")
     x = None
@@ -325,6 +300,7 @@ def _rec_np_regimes(F, G, S, restart, L, out, regime):
             for j in range(L):
                 x = Fs[R3[c, j]] @ x
         x = x + last[:, c]
+    # pass 2: add F^j x_{c,0}
     for j in range(L):
         X[:, :, j] += H
         if j + 1 < L:
@@ -336,11 +312,7 @@ def _adj_np(F, Xb, restart, L, out, regime=None):
     exists, else 0, with ``λ_k = X̄_k + Fᵀ λ_{k+1}`` backward in each segment (with regimes,
     ``F`` of column k's regime)."""
     n, M = F.shape[0], len(restart)
-    if regime is None:
-        FT = F.T
-        FTs, R3, groups, pure = [FT], None, [FT] * L, np.zeros(M, dtype=int)
-    else:
-        FTs, R3, groups, pure = _step_groups(F, regime, M, L, transpose=True)
+    FTs, R3, groups, pure = _step_groups(F, regime, M, L, transpose=True)
     Xb3 = Xb.reshape((n, M, L), order="F")
     Gb = out.reshape((n, M, L), order="F")
     # λ within each chunk with nothing coming in: λ_{c,j} is stored at Gb[:, c, j − 1]
