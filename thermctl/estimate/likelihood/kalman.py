@@ -92,9 +92,8 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
         State matrix [1/s].
     B : casadi.MX or DM, shape (n, m)
         Input matrix [state unit per input unit per s].
-    Sigma : casadi.MX or DM, shape (n, n), or a list of them
-        Diffusion (process noise intensity) [state unit² / s], symmetric PSD. A list gives
-        one ``Qd`` each (same ``Phi`` and ``Gamma``).
+    Sigma : casadi.MX or DM, shape (n, n)
+        Diffusion (process noise intensity) [state unit² / s], symmetric PSD.
     dt : float
         Step [s].
     squarings : int
@@ -109,18 +108,16 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
         :math:`e^{A\,dt}`.
     Gamma : shape (n, m)
         :math:`\int_0^{dt} e^{As} ds\, B`.
-    Qd : shape (n, n), or a list
+    Qd : shape (n, n)
         :math:`\int_0^{dt} e^{As}\Sigma e^{A^T s} ds` (symmetrised).
     """
     n = A.shape[0]
     h = dt / 2.0 ** squarings
     mt = dense_mtimes if isinstance(A, ca.MX) else ca.mtimes
-    several = isinstance(Sigma, (list, tuple))
-    Sigmas = list(Sigma) if several else [Sigma]
-    P, G = A * h, B * h
     # Σ is diagonal in every model of this package: its products are row scalings (n²),
     # which CasADi's sparse product does; a dense Σ goes through BLAS like the rest
-    Ss = [(Sg * h, ca.mtimes if Sg.nnz() <= n else mt) for Sg in Sigmas]
+    mts = ca.mtimes if Sigma.nnz() <= n else mt
+    P, G, S = A * h, B * h, Sigma * h
     I = _eye(n)
     # The Taylor polynomial (Horner form) of two block matrices, by blocks:
     #   [[P, G], [0, 0]]     -> [[Phi, Gamma], [0, I]]
@@ -132,26 +129,22 @@ def discretize(A, B, Sigma, dt: float, squarings: int, order: int = _TAYLOR_ORDE
     # 175 s instead of 187 s (279 instead of 303 CPU s), the same selection path. The
     # products go through BLAS (dense_mtimes): the blocks fill in after a few terms, and
     # CasADi's own loop was slower (twin house, 116 states: a gradient 0.128 → 0.095 s).
-    # Several Σ (the occupied-hours filter) share Phi and Gamma: one n×n product more per
-    # stage and two per squaring each.
     E = I + P / order
     Gm = G / order
-    F12s = [S / order for S, _ in Ss]
+    F12 = S / order
     for k in range(order - 1, 0, -1):
-        F12s = [(mts(S, E.T) - mt(P, F12)) / k for (S, mts), F12 in zip(Ss, F12s)]
+        F12 = (mts(S, E.T) - mt(P, F12)) / k
         Gm = (G + mt(P, Gm)) / k
         E = I + mt(P, E) / k
     Phi, Gam = E, Gm
-    Qs = []
-    for F12 in F12s:
-        Q = mt(Phi, F12)
-        Qs.append(0.5 * (Q + Q.T))
+    Q = mt(Phi, F12)
+    Q = 0.5 * (Q + Q.T)
     for _ in range(squarings):
-        Qs = [mt(mt(Phi, Q), Phi.T) + Q for Q in Qs]
+        Q = mt(mt(Phi, Q), Phi.T) + Q
         Gam = Gam + mt(Phi, Gam)
         Phi = mt(Phi, Phi)
-    Qs = [0.5 * (Q + Q.T) for Q in Qs]
-    return Phi, Gam, (Qs if several else Qs[0])
+    Q = 0.5 * (Q + Q.T)
+    return Phi, Gam, Q
 
 
 def discretize_np(A, B, Sigma, dt: float):
@@ -331,9 +324,9 @@ def chunked_recursion(F, GZ, starts, restart, L: int, regime=None):
         the previous one.
     L : int
         Chunk length.
-    regime : sequence of int, optional
-        ``regime[c]``: the matrix chunk ``c`` steps with (a filter whose gain switches with
-        the hour). Default: one matrix.
+    regime : sequence of int, length L·M, optional
+        ``regime[k]``: the matrix of the step out of column ``k`` (a filter whose gain
+        switches with the hour). Default: one matrix.
 
     Returns
     -------

@@ -468,7 +468,6 @@ class LikelihoodProblem:
         M = len(chunk_seg)
         self.M = M
         self.restart = [s if o == 0 else -1 for s, o in zip(chunk_seg, chunk_off)]
-
         tmap = np.full(L * M, -1, dtype=int)       # data row of each layout column
         first = np.zeros(L * M, dtype=int)
         for c, (s, o) in enumerate(zip(chunk_seg, chunk_off)):
@@ -730,7 +729,7 @@ class LikelihoodProblem:
         W = ca.DM(self.W0_lay) + _KW * ca.mtimes(ThB_full, ca.DM(self.B_lay))
         occ_extra = []
         if sched:
-            # a second stationary filter for the occupied hours; each chunk runs on its
+            # a second stationary filter for the occupied hours; each row runs on its
             # regime's gain, each column's innovation is scored with its regime's S
             P1, S1, Kf1, _ = kalman.stationary_filter(Phi, C, Qd_occ, R,
                                                       self.options.sda_iterations, self._dare)
