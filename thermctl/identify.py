@@ -312,12 +312,20 @@ class EstimationOptions:
         innovations are far from white (its R̄_v's sandwich/Hessian variance ratio above
         ``selection.misfit_ratio``, the misfit check's test), shared otherwise — and shared
         with ``criterion="kstep"``, holdout selection or ``misfit_ratio=0``, which compute
-        no ratio.
+        no ratio. With ``per_path_p`` set, ``auto`` also chooses per path when the
+        paths' own values disagree beyond their intervals (Cochran's Q, below).
         Where the model is right one value is what the data fix best: on the Pugh Hall
         factor study per path for all 36 cases gives a median step-response error of 9.9 %
         against 2.3 % shared (single paths' values scatter by a factor 4 on 10 days); on
         the 4 cases whose ratio is above 4 it gives 18.3 / 20.3 / 11.6 / 33.1 % against
         23.1 / 24.5 / 21.7 / 31.9 %. Local problems always give per-path values.
+    per_path_p : float
+        With ``per_edge="auto"`` and a shared model whose innovations pass the misfit check's
+        test: one R̄_v per air path when the selected paths' own values (the search's per-path
+        fit, robust Wald variances) disagree beyond their intervals, Cochran's Q with a
+        p-value below this [-]. The shared value is then a compromise the data reject; the
+        per-path intervals are widened to take in the shared one's (widened by the paths'
+        scatter). 0 (default): off, the shared value with its interval widened.
     """
 
     criterion: str = "likelihood"
@@ -336,9 +344,14 @@ class EstimationOptions:
     gain_schedule: str | None = None
     input_timing: str = "auto"
     per_edge: object = "auto"
+    per_path_p: float = 0.0
 
     def check(self):
         _one_of("estimation", "criterion", self.criterion, CRITERIA)
+        if not (isinstance(self.per_path_p, (int, float, np.floating))
+                and not isinstance(self.per_path_p, bool) and 0 <= self.per_path_p < 1):
+            raise DataError(f"identify option estimation.per_path_p must be a p-value in "
+                            f"[0, 1) (0: off), found {self.per_path_p!r}")
         if not (isinstance(self.per_edge, (bool, np.bool_)) or (
                 isinstance(self.per_edge, str) and self.per_edge == "auto")):
             raise DataError(f"identify option estimation.per_edge must be 'auto', True or "
@@ -823,7 +836,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                 _hetero_widen(ida, chk.hetero, sel.edges, notes)
                 _shared_rbar_check(ida, sel.per_edge, notes)
             else:
-                _per_path_widen(ida, shared, notes)
+                _per_path_widen(ida, shared, notes, chk.why)
             _beside_wall_note(spec, net, sel.per_edge, float(np.atleast_1d(gb.rbar_v_)[0]),
                               notes)
             _misfit_note(ida, opt, notes, chk.checked,
@@ -1530,6 +1543,11 @@ must reach when the misfit check runs (``SelectionOptions.misfit_ratio``) [-]: t
 ``--predict-t 2`` of the options, which on the twin house N2 keeps the 3 open doors alone."""
 
 
+MISFIT_WHY = ("the innovations are far from white, and under such a misfit the per-path "
+              "values move with it")
+"""Why a per-path model's R̄_v intervals are widened when the misfit check chose it."""
+
+
 @dataclass
 class _Checked:
     """What :func:`_misfit_check` leaves: the selection after it; the robust Wald intervals
@@ -1545,6 +1563,7 @@ class _Checked:
     per_edge: bool = False
     shared: object = None
     shared_edges: list = field(default_factory=list)    # the structure ``shared`` is of
+    why: str = MISFIT_WHY           # why per path: said where its intervals are widened
     hetero: dict | None = None      # :func:`_path_heterogeneity` of a shared R̄_v kept
 
 
@@ -1599,14 +1618,20 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
     ratio = iv.inflation
     if not ratio > lim:
         logger.info("misfit check: R̄_v variance ratio %.1f (at most %g): not needed", ratio, lim)
-        return _Checked(sel, (gb, wald), per_edge=fixed,
-                        hetero=None if fixed else _path_heterogeneity(trials, sel, opt))
+        het = None if fixed else _path_heterogeneity(trials, sel, opt)
+        p = opt.estimation.per_path_p
+        if auto and het is not None and p and het["p"] < p:
+            out = _per_path_model(sel, trials, notes, _paths_differ_note(het, p))
+            if out.estimator is not gb:
+                return _Checked(out, None, False, True, _hetero_interval(iv, het),
+                                list(sel.edges), why=PATHS_DIFFER_WHY)
+        return _Checked(sel, (gb, wald), per_edge=fixed, hetero=het)
     shown = f"{ratio:.1f}" if ratio < 10 else f"{ratio:.0f}"
     per_edge = fixed or auto
     shared = iv if auto else None           # gb is the shared fit when auto
     if not check:
         # --predict-t: the selection asked the prediction test already; only R̄_v is decided
-        out = _per_path_model(sel, trials, shown, lim, notes)
+        out = _per_path_model(sel, trials, notes, _per_path_note(sel.per_edge, shown, lim))
         per = out.estimator is not gb
         return _Checked(out, None, False, per, shared if per else None, list(sel.edges))
     from .selection import select_air_paths
@@ -1642,7 +1667,7 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         # the check is a second opinion: its failure leaves the selection as it was
         notes.append(f"{head}, but it failed ({exc}); the selection stands unchecked")
         if auto:
-            out = _per_path_model(sel, trials, shown, lim, notes)
+            out = _per_path_model(sel, trials, notes, _per_path_note(sel.per_edge, shown, lim))
             per = out.estimator is not gb
             return _Checked(out, None, False, per, shared if per else None, list(sel.edges))
         return _Checked(sel, (gb, wald), per_edge=fixed)
@@ -1685,7 +1710,7 @@ def _path_heterogeneity(trials, sel, opt) -> dict | None:
     R̄_v's variance grows when the paths do not share one value. None with fewer than two
     paths whose intervals the data close.
     """
-    from scipy.stats import norm
+    from scipy.stats import chi2, norm
 
     from .estimate.likelihood import wald_intervals
     from .estimate.likelihood.uncertainty import random_effects_inflation
@@ -1715,7 +1740,8 @@ def _path_heterogeneity(trials, sel, opt) -> dict | None:
     if len(used) < 2 or not all(x > 0 for x in v):
         return None
     q, tau2, ratio = random_effects_inflation(y, v)
-    return {"paths": used, "Q": q, "tau": math.sqrt(tau2), "ratio": ratio,
+    return {"paths": used, "Q": q, "p": float(chi2.sf(q, len(used) - 1)),
+            "tau": math.sqrt(tau2), "ratio": ratio,
             "rbar_v": {n: math.exp(a) for n, a in zip(used, y)}}
 
 
@@ -1733,17 +1759,43 @@ def _hetero_widen(ida, het, edges, notes) -> None:
     iv = ida.intervals.get("rbar_v")
     if iv is None or not (iv.lower > 0 and iv.value > 0):
         return
-    f = math.sqrt(het["ratio"])
-    # a side the data do not close ends on the search bound already: it stays there
-    lo = iv.value * (iv.lower / iv.value) ** f if iv.closed_lower else iv.lower
-    hi = iv.value * (iv.upper / iv.value) ** f if iv.closed_upper else iv.upper
+    wide = _hetero_interval(iv, het)
     ida.heterogeneity = het
-    why = (f"widened ×{f:.2f} in log: the {len(het['paths'])} air paths' own R̄_v scatter "
-           f"beyond their intervals (Cochran's Q {het['Q']:.1f} on {len(het['paths']) - 1} "
-           f"degree(s) of freedom, between-path spread {100 * het['tau']:.0f} %)")
-    ida.widen("rbar_v", lo, hi, why, (iv.closed_lower, iv.closed_upper))
+    why = f"widened ×{math.sqrt(het['ratio']):.2f} in log: {_scatter(het)}"
+    ida.widen("rbar_v", wide.lower, wide.upper, why, (iv.closed_lower, iv.closed_upper))
     notes.append(f"R̄_v interval {why}; per-path values: identification.json "
                  "structure.selection.per_edge_rbar_v")
+
+
+def _scatter(het) -> str:
+    return (f"the {len(het['paths'])} air paths' own R̄_v scatter beyond their intervals "
+            f"(Cochran's Q {het['Q']:.1f} on {len(het['paths']) - 1} degree(s) of freedom, "
+            f"p {het['p']:.2g}, between-path spread {100 * het['tau']:.0f} %)")
+
+
+def _hetero_interval(iv, het):
+    """``iv`` (a shared R̄_v's interval) with its log half-widths times √ratio of the paths'
+    heterogeneity (:func:`_path_heterogeneity`): the interval of a random-effects mean. A
+    side the data do not close ends on the search bound already and stays there."""
+    from dataclasses import replace
+
+    if iv is None or not (iv.lower > 0 and iv.value > 0) or het["ratio"] <= 1.0:
+        return iv
+    f = math.sqrt(het["ratio"])
+    lo = iv.value * (iv.lower / iv.value) ** f if iv.closed_lower else iv.lower
+    hi = iv.value * (iv.upper / iv.value) ** f if iv.closed_upper else iv.upper
+    return replace(iv, lower=lo, upper=hi)
+
+
+PATHS_DIFFER_WHY = ("the paths' own values differ beyond their intervals, and a path the "
+                    "selection missed or kept falsely moves them")
+
+
+def _paths_differ_note(het, p: float) -> str:
+    vals = het["rbar_v"].values()
+    return (f"R̄_v one per air path (estimation.per_path_p {p:g}): {_scatter(het)}, so one "
+            f"shared value is a compromise the data reject; they run from {min(vals):.3g} to "
+            f"{max(vals):.3g} K/(W m); --shared-rbar keeps the paper's one value")
 
 
 def _pairs(edges) -> set:
@@ -1773,7 +1825,7 @@ def _shared_interval(spec, cal, opt, sel):
             fit.problem_.release_buffers()
 
 
-def _per_path_widen(ida, shared, notes) -> None:
+def _per_path_widen(ida, shared, notes, why: str = MISFIT_WHY) -> None:
     """Per-path R̄_v intervals widened to take in the shared model's: per path was chosen
     because the model misfits, not by a test that the values differ, and under a misfit the
     per-path values move with it (measured: on the finite-volume factor case the true
@@ -1785,14 +1837,11 @@ def _per_path_widen(ida, shared, notes) -> None:
     for k in keys:
         ida.widen(k, shared.lower, shared.upper,
                   f"widened to take in the shared R̄_v's interval [{shared.lower:.3g}, "
-                  f"{shared.upper:.3g}]: the model misfits, and the data do not tell one value "
-                  "per path from one shared value",
+                  f"{shared.upper:.3g}]: {why}",
                   closed=(shared.closed_lower, shared.closed_upper))
     if keys:
         notes.append(f"per-path R̄_v intervals widened to take in the shared model's "
-                     f"[{shared.lower:.3g}, {shared.upper:.3g}] K/(W m): one value per path was "
-                     "chosen because the innovations are far from white, and under such a "
-                     "misfit the per-path values move with it")
+                     f"[{shared.lower:.3g}, {shared.upper:.3g}] K/(W m): {why}")
 
 
 def _per_path_note(per_edge: dict, shown: str, lim: float) -> str:
@@ -1805,16 +1854,17 @@ def _per_path_note(per_edge: dict, shown: str, lim: float) -> str:
             "--shared-rbar keeps the paper's one value")
 
 
-def _per_path_model(sel, trials, shown, lim, notes):
+def _per_path_model(sel, trials, notes, note: str):
     """The selection with the search's own per-path fit of its structure as the model (the
-    fit the search made, in ``trials``); unchanged, with a log line, if it is not there."""
+    fit the search made, in ``trials``), ``note`` said; unchanged, with a log line, if that
+    fit is not there."""
     from dataclasses import replace
 
     got = trials.get(frozenset(air_path_name(a, b) for a, b, _ in sel.edges))
     if got is None:
         logger.info("per-path R̄_v: the selection's per-path fit was not kept; shared R̄_v")
         return sel
-    notes.append(_per_path_note(sel.per_edge, shown, lim))
+    notes.append(note)
     return replace(sel, estimator=got[0])
 
 

@@ -111,6 +111,11 @@ def identify(
                                             "check's ratio above --misfit-ratio), shared "
                                             "otherwise; local problems always give per-path "
                                             "values."),
+    per_path_p: float = typer.Option(_D.estimation.per_path_p, "--per-path-p", min=0.0,
+                                     max=0.999, help="Whole-building fits, R̄_v auto: one "
+                                     "R̄_v per air path also when the paths' own values "
+                                     "disagree beyond their intervals, Cochran's Q with a "
+                                     "p-value below this (0: off)."),
     innovations: str = typer.Option(_D.estimation.innovations, help="Kalman criteria: "
                                     "distribution of the one-step innovations: gaussian, or "
                                     "student (a t whose degrees of freedom are fitted: gains "
@@ -277,7 +282,8 @@ def identify(
                                      gain_schedule=None if gain_schedule == "none"
                                      else gain_schedule,
                                      input_timing=input_timing,
-                                     per_edge="auto" if per_edge is None else per_edge),
+                                     per_edge="auto" if per_edge is None else per_edge,
+                                     per_path_p=per_path_p),
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
