@@ -84,6 +84,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 GLOBAL_MAX_ZONES = 13          # --global-too: buildings with at most this many zones
 LOCAL_CANDIDATES = SplitOptions().candidates   # --local-candidates (the default of identify)
 GAIN_SCHEDULE = SplitOptions().gain_schedule    # --gain-schedule
+JOINT = SplitOptions().joint                    # --joint
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -214,7 +215,7 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
     opt = IdentifyOptions(estimation=EstimationOptions(intervals="none"),
                           split=SplitOptions(scale=scale, workers=workers,
                                              candidates=LOCAL_CANDIDATES,
-                                             gain_schedule=GAIN_SCHEDULE))
+                                             gain_schedule=GAIN_SCHEDULE, joint=JOINT))
     last = {"t": 0.0}
     t_start = time.perf_counter()
 
@@ -448,8 +449,12 @@ def main(argv=None) -> Result:
     ap.add_argument("--gain-schedule", choices=("occupied",), default=None,
                     help="split.gain_schedule: the local fits' gains wander faster in "
                          "occupied hours")
+    ap.add_argument("--joint", action="store_true",
+                    help="split.joint: every kept path tested again in a joint problem of "
+                         "both ends")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
     args = ap.parse_args(argv)
+    globals()["JOINT"] = args.joint
     globals()["LOCAL_CANDIDATES"] = args.local_candidates
     globals()["GAIN_SCHEDULE"] = args.gain_schedule
     if args.quick:

@@ -416,3 +416,63 @@ def test_whole_building_noise_options_are_said_to_skip_the_local_problems(tmp_pa
     assert len(said) == 1 and said[0].startswith("--common-gain 1 acts on"), said
     assert "--noise" not in said[0]
     assert not any("on whole-building fits only" in n for n in notes["plain"])
+
+
+def test_a_joint_problem_of_every_measured_zone_is_the_whole_building(corridor):
+    """A group of zones is one problem with each of them an output (joint_local's pairs):
+    with every measured zone in the group nothing is left outside, and its likelihood at
+    the same parameters is the whole building's."""
+    spec, meas, tb = corridor
+    cal = meas.frame
+    whole = local_problems(spec, cal.columns, zones=[tuple(spec.measured_zones)])[0]
+    assert whole.zone == "+".join(spec.measured_zones)
+    assert whole.spec.measured_zones == spec.measured_zones and not whole.aggregates
+    assert set(whole.spec.boundary) == set(spec.boundary)
+    edges = [(a, b, d) for a, b, d in tb.truth.edges]
+    vals = []
+    for s in (whole.spec, spec):
+        net = ThermalNetwork(s, edges)
+        pb = LikelihoodProblem(net, as_estimation_data(whole.data(cal), net),
+                               LikelihoodOptions(per_edge=True, fit_rows="all"))
+        vals.append((net.n_states, pb.nll(pb.layout.eta0())))
+    assert vals[0][0] == vals[1][0]
+    assert vals[0][1] == pytest.approx(vals[1][1], rel=1e-10)
+
+
+def test_a_pair_problem_holds_both_ends_and_their_candidates(corridor):
+    spec, meas, _ = corridor
+    a, b = spec.measured_zones[:2]
+    pair = local_problems(spec, meas.frame.columns, zones=[(a, b)])[0]
+    ends = local_problems(spec, meas.frame.columns, zones=[a, b])
+    assert pair.zone == f"{a}+{b}" and pair.spec.measured_zones == [a, b]
+    names = {air_path_name(x, y) for p in ends for x, y, _ in p.candidates}
+    assert {air_path_name(x, y) for x, y, _ in pair.candidates} == names
+    assert set(pair.latent) == set(ends[0].latent) | set(ends[1].latent)
+    # b is an output of the pair, an input (boundary node) of a's own problem
+    assert b in ends[0].spec.boundary and b not in pair.spec.boundary
+    ThermalNetwork(pair.spec, pair.candidates)
+
+
+def test_joint_check_drops_a_path_both_ends_kept_that_the_pair_rejects(corridor):
+    """Both ends "kept" the true f1n01–f1s01 and a path between the far ends of the floor
+    (fake local verdicts); asked in a joint problem of its two ends, the false one makes
+    BIC worse (measured +14.8) and is dropped, the true one gains (−148.9) and stays."""
+    from thermctl.local import assemble, joint_local
+    spec, meas, tb = corridor
+    true = air_path_name(*tb.truth.edges[0][:2])
+    false = "air:f1n00-f1s03"
+    assert true == "air:f1n01-f1s01"
+    probs = local_problems(spec, meas.frame.columns)
+    keep = {"f1n01": [true], "f1s01": [true], "f1n00": [false], "f1s03": [false]}
+    res = [_fake(p.zone, keep.get(p.zone, []), {k: -50.0 for k in keep.get(p.zone, [])})
+           for p in probs]
+    li = assemble(probs, res)
+    assert {air_path_name(a, b) for a, b, _ in li.edges} == {true, false}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = joint_local(spec, meas.frame, li, workers=1)
+    assert [air_path_name(a, b) for a, b, _ in out.edges] == [true]
+    v = {x.name: x for x in out.verdicts}
+    assert v[false].reason.startswith("out by") and "joint check (f1n00+f1s03): out" in v[false].reason
+    assert "joint check (f1n01+f1s01): in" in v[true].reason
+    assert out.rbar_v.keys() == {true} and out.cpu > li.cpu

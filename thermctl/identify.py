@@ -452,6 +452,10 @@ class SplitOptions:
     gain_schedule : {None, "occupied"}
         The gains of every local fit wander faster in occupied hours
         (``estimation.gain_schedule`` is the whole-building one).
+    joint : bool
+        Test every air path the rule keeps between two measured zones once more in a joint
+        problem of both ends, both temperatures predicted together
+        (:func:`thermctl.local.joint_local`). Off by default.
     """
 
     scale: str = "auto"
@@ -467,6 +471,7 @@ class SplitOptions:
     confirm: bool = False
     fast_gain: bool = False
     gain_schedule: str | None = None
+    joint: bool = False
 
     def splits(self, n_measured: int) -> bool:
         """Whether a building of ``n_measured`` measured zones is split into local problems
@@ -871,7 +876,8 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
                         client=client or opt.split.scheduler, progress=progress,
                         latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
-                        s_min=opt.structure.s_min, confirm=opt.split.confirm)
+                        s_min=opt.structure.s_min, confirm=opt.split.confirm,
+                        joint=opt.split.joint)
     return _finish_local(meas, cal, val, opt, li, progress, client)
 
 

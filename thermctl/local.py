@@ -58,7 +58,8 @@ from .network import ThermalNetwork, air_path_name
 from .spec import WALL_CLASSES, BuildingSpec, Distance, Zone, wall_class
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
-           "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble", "identify_local", "COMBINE_RULES",
+           "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble",
+           "identify_local", "joint_local", "COMBINE_RULES",
            "combine_ua_factors"]
 
 log = logging.getLogger(__name__)
@@ -140,7 +141,7 @@ class LocalProblem:
     @property
     def latent(self) -> list[str]:
         """Unmeasured zones inside the problem."""
-        return [z for z in self.spec.zone_names if z != self.zone]
+        return [z.name for z in self.spec.zones if not z.measured]
 
     @property
     def n_states(self) -> int:
@@ -159,8 +160,11 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
     columns : iterable of str, optional
         Data columns available (``T:<node>``, ``ms:<zone>``...); a problem reads only
         those of its nodes. Default: every column its nodes could have.
-    zones : list of str, optional
-        Measured zones to make problems for (default: every measured zone).
+    zones : list of str or of tuple of str, optional
+        Measured zones to make problems for (default: every measured zone). A tuple of
+        measured zones makes one *joint* problem of them (:func:`joint_local`): each is an
+        output of the same model, named ``a+b``; its candidates are the pairs with an end
+        among them.
     parallel : bool
         Pairs joined by a wall are candidates too (an open door beside a wall).
     unmeasured : bool
@@ -201,11 +205,14 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         touching.setdefault(b, set()).add(a)
     out = []
     for z in (spec.measured_zones if zones is None else zones):
-        if z not in meas:
-            raise DataError(f"local problem: {z!r} is not a measured zone of {spec.source}")
+        inner = (z,) if isinstance(z, str) else tuple(z)
+        for m in inner:
+            if m not in meas:
+                raise DataError(f"local problem: {m!r} is not a measured zone of {spec.source}")
+        z, own = "+".join(inner), set(inner)
         # latent closure: unmeasured zones reachable through unmeasured zones, breadth
         # first up to latent_depth
-        local, frontier, depth = {z}, [z], 0
+        local, frontier, depth = set(inner), list(inner), 0
         while frontier and (latent_depth is None or depth < latent_depth):
             nxt = []
             for n in frontier:
@@ -217,8 +224,8 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         zones_l = [zz for zz in spec.zones if zz.name in local]
         walls, proxies = _proxy_walls(spec, [w for w in spec.walls
                                              if w.a in local or w.b in local], local, meas)
-        cands = [(c.a, c.b, c.d) for c in allc if z in c.pair]
-        walls, aggregates = _aggregate_far_walls(walls, local, z, meas) \
+        cands = [(c.a, c.b, c.d) for c in allc if own & set(c.pair)]
+        walls, aggregates = _aggregate_far_walls(walls, local, own, meas) \
             if aggregate else (walls, [])
         nodes = {w.a for w in walls} | {w.b for w in walls}
         nodes |= {n for a, b, _ in cands for n in (a, b)}
@@ -236,7 +243,7 @@ def local_problems(spec: BuildingSpec, columns=None, zones=None, parallel: bool 
         flows = tuple(f for f in spec.flows if f.dst in local)
         sub = BuildingSpec(f"{spec.name}:{z}", tuple(zones_l), tuple(bnd), tuple(walls), dists,
                            1.0, spec.w_s, f"{spec.source} (local problem of {z})", flows)
-        cols = [f"T:{n}" for n in [z] + bnd if n not in agg_nodes]
+        cols = [f"T:{n}" for n in list(inner) + bnd if n not in agg_nodes]
         for zz in zones_l:          # spec order, not set order: the same columns every run
             cols += [f"ms:{zz.name}", f"Ts:{zz.name}", f"Q:{zz.name}"]
         for f in flows:
@@ -323,7 +330,7 @@ def _wall_shape(w):
             float(f"{Rt * Ct:.6g}"))
 
 
-def _aggregate_far_walls(walls, local, zone, meas):
+def _aggregate_far_walls(walls, local, own, meas):
     """Merge the walls from a latent zone to measured zones outside the problem.
 
     A latent hallway touches every office on its floor, and each of those walls would add
@@ -333,7 +340,7 @@ def _aggregate_far_walls(walls, local, zone, meas):
     hallway equals that of one wall with ``s = Σ s_j`` whose far end is at the weighted
     mean ``Σ s_j T_j / Σ s_j`` — exact, not an approximation. The mean becomes a boundary
     node ``<zone>~<k>`` of the local problem (computed by :meth:`LocalProblem.data`).
-    The problem's own ``zone``'s walls stay separate.
+    The walls of the problem's own zones (the set ``own``) stay separate.
     """
     from .spec import Wall
     keep, groups = [], {}
@@ -341,7 +348,7 @@ def _aggregate_far_walls(walls, local, zone, meas):
         a_in, b_in = w.a in local, w.b in local
         far = w.b if a_in else w.a
         near = w.a if a_in else w.b
-        if (a_in and b_in) or zone in (near, far) or far not in meas:
+        if (a_in and b_in) or near in own or far in own or far not in meas:
             keep.append(w)
             continue
         groups.setdefault((near, _wall_shape(w)), []).append((w, far))
@@ -781,7 +788,8 @@ def one_sided(problems, results, groups=None) -> dict:
 
 
 def _confirm_task(problem, sub, kept, tests, kwargs):
-    """A task: test ``tests`` against ``kept`` in one local problem (errors returned)."""
+    """A task: test ``tests`` against ``kept`` in one local problem (errors returned: an
+    empty verdict)."""
     from ._blas import single_thread_blas
     from .selection import judge_air_paths
     t0, c0 = time.perf_counter(), time.process_time()
@@ -791,7 +799,7 @@ def _confirm_task(problem, sub, kept, tests, kwargs):
             warnings.simplefilter("ignore", ConvergenceWarning)
             got = judge_air_paths(problem.spec, sub, kept, tests, **kwargs)
     except Exception as exc:            # noqa: BLE001 - one zone's failure must not stop the rest
-        log.warning("confirming %s in the local problem of %s failed: %s",
+        log.warning("testing %s in the local problem of %s failed: %s",
                     ", ".join(air_path_name(a, b) for a, b, _ in tests), problem.zone, exc)
         got = {}
     return got, time.perf_counter() - t0, time.process_time() - c0
@@ -858,6 +866,95 @@ def confirm_local(problems, results, frame, *, workers: int | None = None, clien
         r.cpu += cpu
         r.n_fits += 1 + len(todo[i])
     return results
+
+
+def joint_local(spec, frame, li, *, workers: int | None = None, client=None, progress=None,
+                parallel: bool = True, latent_depth: int | None = 1, **kwargs):
+    """Test every kept air path between two measured zones in one problem of both.
+
+    A local problem takes its neighbours' temperatures as exact inputs, so a neighbour that
+    shares a zone's unmeasured disturbances (the same occupancy hours, the same façade) is
+    a free proxy for them there, and the AND rule of :func:`combine` keeps such a path when
+    both ends are fooled alike. In a joint problem of both ends (:func:`local_problems`
+    with the pair as one group: both temperatures are outputs, predicted together, each
+    zone's other kept air paths and measured neighbours as in its own problem) the path
+    must explain both zones' innovations with one symmetric coupling, as in the
+    whole-building likelihood: the remedy for correlated disturbances that local module
+    identification names (widen the local problem to predict correlated neighbours
+    jointly; Ramaswamy & Van den Hof, IEEE TAC 2021). A path is kept when adding it to the
+    joint problem's other kept paths passes the local search's own test
+    (:func:`thermctl.selection.judge_air_paths`: ``margin`` and the daily gain ``min_t``).
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+    frame : pandas.DataFrame
+        Calibration data.
+    li : LocalIdentification
+        Of :func:`assemble`; a new one is returned, its verdicts' reasons extended.
+    workers, client, progress
+        As :func:`run_local`.
+    parallel, latent_depth
+        As :func:`local_problems` (the zone problems' own).
+    **kwargs
+        :func:`fit_local`'s keywords (``criterion``, ``margin``, ``min_t``, ``solar``...).
+
+    Returns
+    -------
+    LocalIdentification
+    """
+    from dataclasses import replace
+    meas = set(spec.measured_zones)
+    kept = [(v.a, v.b, v.d) for v in li.verdicts if v.kept]
+    pairs = [e for e in kept if e[0] in meas and e[1] in meas]
+    if not pairs:
+        return li
+    t0 = time.perf_counter()
+    probs = local_problems(spec, frame.columns, zones=[(a, b) for a, b, _ in pairs],
+                           parallel=parallel, latent_depth=latent_depth)
+    tasks = []
+    for (a, b, d), p in zip(pairs, probs):
+        names = {air_path_name(x, y) for x, y, _ in p.candidates}
+        base = [e for e in kept if air_path_name(e[0], e[1]) in names
+                and {e[0], e[1]} != {a, b}]
+        tasks.append((p, p.data(frame), base, [(a, b, d)], kwargs))
+    say = progress or (lambda *a: None)
+    got = {}
+
+    def done(k, out):
+        got[k] = out
+        (a, b, _), res = pairs[k], out[0].get(air_path_name(*pairs[k][:2]))
+        log.info("joint check %d/%d: %s (%d states) %s in %.0f s", len(got), len(pairs),
+                 air_path_name(a, b), probs[k].n_states,
+                 "failed" if res is None else f"{'in' if res[0] else 'out'}: {res[3]}",
+                 out[1])
+        say("joint checks", len(got), len(pairs))
+
+    say("joint checks", 0, len(pairs))
+    order = sorted(range(len(pairs)), key=lambda k: -probs[k].n_states)
+    _dispatch(_confirm_task, tasks, order, workers, client, done, "joint")
+    verdicts, cpu = [], 0.0
+    for v in li.verdicts:
+        k = next((i for i, (a, b, _) in enumerate(pairs) if {a, b} == {v.a, v.b}), None)
+        if k is None:
+            verdicts.append(v)
+            continue
+        res, _, c = got[k]
+        cpu += c
+        r = res.get(v.name)
+        if r is None:           # the test failed: the zones' verdicts stand
+            verdicts.append(replace(v, reason=v.reason + "; joint check failed, not applied"))
+            continue
+        ok, _, _, note, rb = r
+        verdicts.append(replace(v, kept=bool(ok), rbar_v=v.rbar_v if ok else float("nan"),
+                                reason=(v.reason if ok else v.reason.replace("in by", "out by",
+                                                                            1))
+                                + f"; joint check ({probs[k].zone}): "
+                                + f"{'in' if ok else 'out'}, {note}"))
+    edges = [(v.a, v.b, v.d) for v in verdicts if v.kept]
+    return replace(li, verdicts=verdicts, edges=edges,
+                   rbar_v={v.name: v.rbar_v for v in verdicts if v.kept},
+                   time=li.time + time.perf_counter() - t0, cpu=li.cpu + cpu)
 
 
 # ---------------------------------------------------------------------------- combine
@@ -1055,7 +1152,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                    fit_rows: str = "all", latent_depth: int | None = 1,
                    candidates: str = "all", level: float = 0.05,
                    s_min: float = 0.25, min_t: float = 0.0, confirm: bool = False,
-                   **options) -> LocalIdentification:
+                   joint: bool = False, **options) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -1091,6 +1188,9 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     confirm : bool
         With ``rule="both"``: test every air path kept at one end only at its other end
         (:func:`confirm_local`).
+    joint : bool
+        Test every kept air path between measured zones once more in a joint problem of
+        both ends (:func:`joint_local`).
     **options
         Other :class:`thermctl.estimate.likelihood.LikelihoodOptions` fields of the local
         fits (``internal_mass``...).
@@ -1116,7 +1216,12 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         results = confirm_local(problems, results, frame, workers=workers, client=client,
                                 progress=progress, criterion=criterion, margin=margin,
                                 solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
-    return assemble(problems, results, rule, margin, time.perf_counter() - t0)
+    li = assemble(problems, results, rule, margin, time.perf_counter() - t0)
+    if joint:
+        li = joint_local(spec, frame, li, workers=workers, client=client, progress=progress,
+                         parallel=parallel, latent_depth=latent_depth, criterion=criterion,
+                         margin=margin, solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
+    return li
 
 
 def assemble(problems, results, rule: str = "both", margin: float = 10.0,

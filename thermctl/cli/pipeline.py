@@ -234,6 +234,10 @@ def identify(
                                        help="Local problems, --combine both: test an air path "
                                        "kept at one end only at its other end (a greedy search "
                                        "may stop before reaching it)."),
+    local_joint: bool = typer.Option(_D.split.joint, "--local-joint/--no-local-joint",
+                                     help="Local problems: test every kept air path between "
+                                     "two measured zones again in one problem of both ends, "
+                                     "both temperatures predicted together."),
     columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
                                  "column), e.g. from `thermctl spec from-brick`."),
 ):
@@ -287,7 +291,7 @@ def identify(
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
-                           confirm=local_confirm),
+                           confirm=local_confirm, joint=local_joint),
         calibration=_window(calibration, "--calibration"),
         validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:
