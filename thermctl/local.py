@@ -885,6 +885,12 @@ def joint_local(spec, frame, li, *, workers: int | None = None, client=None, pro
     joint problem's other kept paths passes the local search's own test
     (:func:`thermctl.selection.judge_air_paths`: ``margin`` and the daily gain ``min_t``).
 
+    Measured on the 49-zone corridor (14 days, seeds 0 and 1): every one of the 26 paths the
+    AND rule kept passed, the 4 false ones included (neighbouring offices on one side, BIC
+    −116 and t 2.5 for f1n10–f1n11), for 1.8× the CPU; so it is not part of ``identify``'s
+    default (``split.joint``), and what fools the local problems is not the exact-input
+    approximation (docs/identification.md).
+
     Parameters
     ----------
     spec : BuildingSpec
