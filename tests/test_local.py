@@ -476,3 +476,25 @@ def test_joint_check_drops_a_path_both_ends_kept_that_the_pair_rejects(corridor)
     assert v[false].reason.startswith("out by") and "joint check (f1n00+f1s03): out" in v[false].reason
     assert "joint check (f1n01+f1s01): in" in v[true].reason
     assert out.rbar_v.keys() == {true} and out.cpu > li.cpu
+
+
+def test_identify_many_runs_the_joint_check_as_identify_does():
+    """``split.joint`` in a portfolio run: each building's kept paths are tested in joint
+    problems, with the verdicts ``identify`` gives it alone (a 7-zone corridor, 3 days,
+    whose one true path f1n00–f1s00 the local problems keep)."""
+    from thermctl.identify import (EstimationOptions, IdentifyOptions, SplitOptions, identify,
+                                   identify_many)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate("corridor", zones=7, days=3, seed=2)
+        meas = read_measurements(tb.data, tb.spec)
+    opt = IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                          split=SplitOptions(scale="local", workers=1, joint=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        many = identify_many([meas], opt)[0]
+        alone = identify(meas, opt)
+    joint = {v.name: v.reason for v in many.local.verdicts if "joint check" in v.reason}
+    assert list(joint) == ["air:f1n00-f1s00"], "the check did not run on the kept path"
+    assert joint == {v.name: v.reason for v in alone.local.verdicts if "joint check" in v.reason}
+    assert many.model.network.convection_pairs == alone.model.network.convection_pairs

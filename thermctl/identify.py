@@ -1007,7 +1007,8 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
     """
     import time as _time
 
-    from .local import assemble, confirm_local, local_problems, propose_sin, run_local
+    from .local import (assemble, confirm_local, joint_local, local_problems, propose_sin,
+                        run_local)
 
     opt = options or IdentifyOptions()
     opt.check()
@@ -1055,6 +1056,11 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.split.combine,
                           opt.selection.margin, wall)
             cal, val = splits[k]
+            if opt.split.joint:
+                # one building's pairs at a time: its joint problems read its own table
+                li = joint_local(items[k].spec, cal.frame, li, workers=opt.split.workers,
+                                 client=client, progress=progress,
+                                 latent_depth=opt.split.latent_depth, **_local_fit_options(opt))
             out[k] = _finish_local(items[k], cal, val, opts[k], li, progress, client)
             if timing[k]:
                 out[k].notes.insert(0, timing[k])
