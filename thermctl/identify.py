@@ -458,7 +458,9 @@ class SplitOptions:
     joint : bool
         Test every air path the rule keeps between two measured zones once more in a joint
         problem of both ends, both temperatures predicted together
-        (:func:`thermctl.local.joint_local`). Off by default.
+        (:func:`thermctl.local.joint_local`); the stability resamples run without it. Off
+        by default: on the 49-zone corridor every kept path passed it, the false ones too,
+        for 1.8× the CPU (docs/identification.md).
     """
 
     scale: str = "auto"
