@@ -22,6 +22,7 @@ import time
 import warnings
 
 from thermctl.data import read_measurements
+from thermctl.identify import IdentifyOptions, _local_fit_options
 from thermctl.local import identify_local, joint_local
 from thermctl.testbed import generate
 
@@ -36,8 +37,7 @@ def main(argv=None):
                     help="common gains in the joint problems (default 0)")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
-    # what identify's local path asks every local fit (identify._local_fit_options, defaults)
-    kw = dict(criterion="bic", margin=10.0, solar=True, fit_rows="all", min_t=2.0)
+    kw = _local_fit_options(IdentifyOptions())     # what identify asks every local fit
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate("corridor", zones=args.zones, days=args.days, seed=args.seed)

@@ -940,8 +940,9 @@ def joint_local(spec, frame, li, *, workers: int | None = None, client=None, pro
     order = sorted(range(len(pairs)), key=lambda k: -probs[k].n_states)
     _dispatch(_confirm_task, tasks, order, workers, client, done, "joint")
     verdicts, cpu = [], 0.0
+    index = {air_path_name(a, b): k for k, (a, b, _) in enumerate(pairs)}
     for v in li.verdicts:
-        k = next((i for i, (a, b, _) in enumerate(pairs) if {a, b} == {v.a, v.b}), None)
+        k = index.get(v.name)
         if k is None:
             verdicts.append(v)
             continue
