@@ -48,6 +48,11 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(estimation=EstimationOptions(noise="room")), "estimation.noise"),
     (IdentifyOptions(estimation=EstimationOptions(common_gain=-1)), "estimation.common_gain"),
     (IdentifyOptions(estimation=EstimationOptions(common_gain=True)), "estimation.common_gain"),
+    (IdentifyOptions(estimation=EstimationOptions(per_path_p=1.5)), "estimation.per_path_p"),
+    (IdentifyOptions(estimation=EstimationOptions(per_path_p=True)), "estimation.per_path_p"),
+    (IdentifyOptions(estimation=EstimationOptions(per_path_p="0.01")), "estimation.per_path_p"),
+    (IdentifyOptions(split=SplitOptions(joint="no")), "split.joint must be true or false"),
+    (IdentifyOptions(split=SplitOptions(confirm=1)), "split.confirm must be true or false"),
 ])
 def test_check_rejects_bad_and_contradictory_options_in_one_line(opt, match):
     with pytest.raises(DataError, match=match) as exc:

@@ -497,6 +497,11 @@ class SplitOptions:
         if self.latent_depth is not None and self.latent_depth < 1:
             raise DataError(f"identify option split.latent_depth must be >= 1 or None, found "
                             f"{self.latent_depth}")
+        for name in ("confirm", "fast_gain", "joint"):
+            # a string such as "no" would be truthy: said, not switched on
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise DataError(f"identify option split.{name} must be true or false, found "
+                                f"{getattr(self, name)!r}")
 
 
 @dataclass
