@@ -1775,14 +1775,14 @@ def _hetero_widen(ida, het, edges, notes) -> None:
     study (14 days, per-zone noise): random walls with published U-values, seed 0, per-path
     4.6e-4, 3.0e-4, 3.5e-4 ± 5–13 %, Q 6.7, ratio 5.7: the shared 3.66e-4 [3.43e-4, 3.92e-4]
     missed the truth 3.36e-4, widened [3.13e-4, 4.31e-4] covers it."""
-    if ida is None or het is None or het["ratio"] <= 1.0:
+    if ida is None or het is None:
         return
     if set(het["paths"]) - {air_path_name(a, b) for a, b, _ in edges}:
         return                              # of a structure since changed (stability)
     iv = ida.intervals.get("rbar_v")
-    if iv is None or not (iv.lower > 0 and iv.value > 0):
-        return
     wide = _hetero_interval(iv, het)
+    if wide is iv:                          # nothing to widen (see _hetero_interval)
+        return
     ida.heterogeneity = het
     why = f"widened ×{math.sqrt(het['ratio']):.2f} in log: {_scatter(het)}"
     ida.widen("rbar_v", wide.lower, wide.upper, why, (iv.closed_lower, iv.closed_upper))
@@ -1849,11 +1849,13 @@ def _shared_interval(spec, cal, opt, sel):
 
 
 def _per_path_widen(ida, shared, notes, why: str = MISFIT_WHY) -> None:
-    """Per-path R̄_v intervals widened to take in the shared model's: per path was chosen
-    because the model misfits, not by a test that the values differ, and under a misfit the
-    per-path values move with it (measured: on the finite-volume factor case the true
-    paths' own values were 25–58 % below the truth, 3.36e-4, with intervals of ±25–73 %
-    that missed it, while the shared value was within 3 %)."""
+    """Per-path R̄_v intervals widened to take in the shared model's, ``why`` said: when the
+    misfit check chose per path it did so because the model misfits, not by a test that the
+    values differ, and under a misfit the per-path values move with it (measured: on the
+    finite-volume factor case the true paths' own values were 25–58 % below the truth,
+    3.36e-4, with intervals of ±25–73 % that missed it, while the shared value was within
+    3 %); when ``per_path_p`` chose it, a path the selection missed or kept falsely moves
+    them as well."""
     if ida is None or shared is None:
         return
     keys = [k for k in ida.intervals if ConvectionParameters.is_rbar(k, per_edge=True)]
