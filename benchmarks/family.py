@@ -184,7 +184,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 27
+SESSION = 28
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -284,6 +284,9 @@ def main(argv=None):
     ap.add_argument("--gain-schedule", choices=["occupied"], default=None,
                     help="identify's estimation.gain_schedule: the gains wander faster in "
                          "occupied hours (case names get ' [schedule occupied]')")
+    ap.add_argument("--loop-gain", action="store_true",
+                    help="identify's estimation.loop_gain: a fitted gain per zone with supply "
+                         "air for its loop acting between samples (case names get ' [loop]')")
     ap.add_argument("--per-path-p", type=float, default=0.0, metavar="P",
                     help="identify's estimation.per_path_p: R̄_v per path when Cochran's Q's "
                          "p-value is below P (case names get ' [per path p P]')")
@@ -374,6 +377,8 @@ def main(argv=None):
         if args.gain_schedule:
             name, est["gain_schedule"] = name + f" [schedule {args.gain_schedule}]", \
                 args.gain_schedule
+        if args.loop_gain:
+            name, est["loop_gain"] = name + " [loop]", True
         if args.per_path_p:
             name, est["per_path_p"] = name + f" [per path p {args.per_path_p:g}]", \
                 args.per_path_p

@@ -85,6 +85,7 @@ GLOBAL_MAX_ZONES = 13          # --global-too: buildings with at most this many 
 LOCAL_CANDIDATES = SplitOptions().candidates   # --local-candidates (the default of identify)
 GAIN_SCHEDULE = SplitOptions().gain_schedule    # --gain-schedule
 JOINT = SplitOptions().joint                    # --joint
+LOOP_GAIN = EstimationOptions().loop_gain        # --loop-gain
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -212,7 +213,7 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
     """``identify`` of one building at one scale / worker count, measured and scored."""
     spec = meas.spec
     row = Row(label, zones, len(spec.measured_zones), scale, workers if scale == "local" else None)
-    opt = IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+    opt = IdentifyOptions(estimation=EstimationOptions(intervals="none", loop_gain=LOOP_GAIN),
                           split=SplitOptions(scale=scale, workers=workers,
                                              candidates=LOCAL_CANDIDATES,
                                              gain_schedule=GAIN_SCHEDULE, joint=JOINT))
@@ -452,9 +453,13 @@ def main(argv=None) -> Result:
     ap.add_argument("--joint", action="store_true",
                     help="split.joint: every kept path tested again in a joint problem of "
                          "both ends")
+    ap.add_argument("--loop-gain", action="store_true",
+                    help="estimation.loop_gain: a fitted gain per zone with supply air for its "
+                         "loop acting between samples")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
     args = ap.parse_args(argv)
     globals()["JOINT"] = args.joint
+    globals()["LOOP_GAIN"] = args.loop_gain
     globals()["LOCAL_CANDIDATES"] = args.local_candidates
     globals()["GAIN_SCHEDULE"] = args.gain_schedule
     if args.quick:

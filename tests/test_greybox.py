@@ -272,6 +272,84 @@ def test_gain_schedule_is_a_filter_whose_gain_switches_with_the_hour(sim5, net5)
         LikelihoodOptions(gain_schedule="occupied", disturbance="none").check()
 
 
+def test_loop_gain_is_a_held_reading_answered_over_the_step(sim5, net5):
+    """``loop_gain=True``: in the rows with the supply on, each measured zone with supply air
+    gets ``k_z·(y_{z,k} − T_z)`` over the step. The on-regime matrices are the exact
+    discretisation of ``A − k_z/C_z`` at the zone with the reading as a held input (scipy's
+    expm of the augmented matrix); the likelihood equals a numpy filter that runs each row
+    on its regime's matrices and gain (to 1e-10); at the lower bound (0.01 W/K) it is the
+    model without loops; the gradient matches central differences."""
+    data, opts = sim5
+    data = copy.copy(data)
+    U = data.U.copy()
+    hour = (np.arange(len(data)) * DT / 3600.0) % 24.0
+    off = (hour < 6.0) | (hour >= 19.0)
+    U[np.ix_(off, np.arange(net5.n_inputs)[net5.input_slices()["ms"]])] = 0.0
+    data.U = U
+    lo = LikelihoodProblem(net5, data, LikelihoodOptions(**{**opts.__dict__, "loop_gain": True}))
+    base = LikelihoodProblem(net5, data, opts)
+    assert np.array_equal(lo.row_regime.astype(bool), ~off)
+    names = [n for n in lo.layout.names if n.startswith("loop_gain[")]
+    assert names == [f"loop_gain[{z}]" for z in data.zones]    # each has supply air
+    k = dict(zip(names, (150.0, 400.0, 40.0)))                  # [W/K]
+    eta = lo.layout.eta0()
+    for name, v in k.items():
+        eta[lo.layout.index(name)] = np.log(v)
+    m = lo.matrices(eta)
+    n = lo.n
+    A_on = m["A"].copy()
+    By = np.zeros((n, lo.ny))
+    for j, z in enumerate(lo.meas):
+        c = k[names[j]] / lo.cap_z[z]            # [1/s]
+        A_on[z, z] -= c
+        By[z, j] = c
+    Bfull = np.hstack([m["B"], By])
+    M = np.zeros((n + Bfull.shape[1],) * 2)
+    M[:n, :n], M[:n, n:] = A_on * DT, Bfull * DT
+    E = sla.expm(M)
+    np.testing.assert_allclose(m["Phi_on"], E[:n, :n], rtol=1e-9, atol=1e-11)
+    G = np.hstack([m["Gamma_on"], m["Gamma_y"]])
+    np.testing.assert_allclose(G, E[:n, n:], rtol=1e-8, atol=1e-11 * np.abs(G).max())
+    # a loop that answers within the step pulls the zone toward its reading: the zone's
+    # own coefficient in Phi falls
+    z = lo.meas[1]
+    assert m["Phi_on"][z, z] < m["Phi"][z, z] - 0.1
+    W = lo.inputs(eta)
+    mats = {0: (m["Phi"], m["Gamma"], np.zeros_like(m["Gamma_y"]), m["Kf"], m["S"]),
+            1: (m["Phi_on"], m["Gamma_on"], m["Gamma_y"], m["Kf_on"], m["S_on"])}
+    nll = 0.0
+    for s, (a, b) in enumerate(lo.segments):
+        x = m["X0"][:, s].copy()
+        for t in range(a, b):
+            Phi, Gam, Gy, K, S = mats[lo.row_regime[t]]
+            e = data.Y[t] - lo.C @ x
+            if t - a >= lo.burn and lo.fit_rows[t]:
+                nll += 0.5 * (e @ np.linalg.solve(S, e) + np.log(np.linalg.det(S))
+                              + lo.ny * kalman.LOG2PI)
+            x = Phi @ (x + K @ e) + Gam @ W[t] + Gy @ data.Y[t]
+    assert lo.nll(eta) == pytest.approx(nll, rel=1e-10)
+    e0 = eta.copy()
+    for name in names:
+        e0[lo.layout.index(name)] = np.log(1e-2)
+    assert lo.nll(e0) == pytest.approx(base.nll(base.layout.eta0()), rel=1e-5)
+    assert abs(lo.nll(eta) - lo.nll(e0)) > 10.0
+    f, g = lo.nll_grad(eta)
+    for name in names:
+        i, h = lo.layout.index(name), 1e-5
+        ep, em = eta.copy(), eta.copy()
+        ep[i] += h
+        em[i] -= h
+        fd = (lo.nll(ep) - lo.nll(em)) / (2 * h)
+        # the stationary filter's Riccati solution converges to ~1e-13: 1e-6·|f| as elsewhere
+        assert g[i] == pytest.approx(fd, rel=1e-5, abs=1e-6 * abs(f)), name
+    # k-step predictions: the loops answer the predicted temperature; without loops the
+    # criterion is the model's without them
+    assert lo.kstep(e0) == pytest.approx(base.kstep(base.layout.eta0()), rel=1e-5)
+    assert lo.kstep(eta) != pytest.approx(lo.kstep(e0), rel=1e-3)
+    with pytest.raises(EstimationError, match="do not combine"):
+        LikelihoodOptions(loop_gain=True, gain_schedule="occupied").check()
+
+
 def test_student_innovations_are_the_multivariate_t_density(sim5, net5):
     """``innovations="student"``: the stationary filter's innovations scored by scipy's
     multivariate t with the filter's S as scale; ν → ∞ gives the Gaussian likelihood."""

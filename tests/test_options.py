@@ -52,6 +52,11 @@ def test_defaults_resolve_to_the_grey_box_pipeline():
     (IdentifyOptions(estimation=EstimationOptions(per_path_p=True)), "estimation.per_path_p"),
     (IdentifyOptions(estimation=EstimationOptions(per_path_p="0.01")), "estimation.per_path_p"),
     (IdentifyOptions(split=SplitOptions(joint="no")), "split.joint must be true or false"),
+    (IdentifyOptions(estimation=EstimationOptions(loop_gain="no")), "estimation.loop_gain"),
+    (IdentifyOptions(estimation=EstimationOptions(loop_gain=True, gain_schedule="occupied")),
+     "do not combine"),
+    (IdentifyOptions(estimation=EstimationOptions(loop_gain=True, criterion="simulation")),
+     "estimation.loop_gain needs a Kalman criterion"),
     (IdentifyOptions(split=SplitOptions(confirm=1)), "split.confirm must be true or false"),
 ])
 def test_check_rejects_bad_and_contradictory_options_in_one_line(opt, match):

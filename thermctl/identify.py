@@ -284,6 +284,14 @@ class EstimationOptions:
         wander faster (a fitted ratio) in the occupied hours 7–19 h of every day than at
         night (:class:`~thermctl.estimate.likelihood.LikelihoodOptions`); None (default):
         one intensity all day.
+    loop_gain : bool
+        Kalman criteria, whole-building fits and local problems: a fitted gain
+        ``k_z`` [W/K] per measured zone with supply air for its control loop acting between
+        samples, ``k_z·(y_z − T_z)`` over each step in which the supply is on (the reading
+        the loop last saw, held; :class:`~thermctl.estimate.likelihood.LikelihoodOptions`).
+        The identified model does not carry it (it describes the data's controller).
+        Measured in docs/identification.md, "A loop between samples"; False (default):
+        none.
     common_gain : int
         Kalman criteria, whole-building fits: this many common gains, each a first-order
         process that heats every measured zone with its own fitted loading
@@ -346,6 +354,7 @@ class EstimationOptions:
     noise: str = "auto"
     common_gain: int = 0
     gain_schedule: str | None = None
+    loop_gain: bool = False
     input_timing: str = "auto"
     per_edge: object = "auto"
     per_path_p: float = 0.0
@@ -367,6 +376,12 @@ class EstimationOptions:
         _one_of("estimation", "innovations", self.innovations, ("gaussian", "student"))
         _one_of("estimation", "noise", self.noise, ("auto", "zone", "shared"))
         _one_of("estimation", "gain_schedule", self.gain_schedule, (None, "occupied"))
+        if self.loop_gain not in (True, False):
+            raise DataError(f"identify option estimation.loop_gain must be True or False "
+                            f"(--loop-gain), found {self.loop_gain!r}")
+        if self.loop_gain and self.gain_schedule is not None:
+            raise DataError("identify options estimation.loop_gain and gain_schedule do not "
+                            "combine (each gives the filter two regimes); choose one")
         if self.fast_gain not in ("auto", True, False):
             raise DataError(f"identify option estimation.fast_gain must be 'auto', True or "
                             f"False (--fast-gain auto, on or off), found {self.fast_gain!r}")
@@ -376,7 +391,8 @@ class EstimationOptions:
                             f"found {self.common_gain!r}")
         for name, on in (("common_gain", bool(self.common_gain)),
                          ("noise", self.noise == "zone"),
-                         ("gain_schedule", self.gain_schedule is not None)):
+                         ("gain_schedule", self.gain_schedule is not None),
+                         ("loop_gain", self.loop_gain)):
             if on and self.criterion == "simulation":
                 raise DataError(f"identify option estimation.{name} needs a Kalman criterion "
                                 "(likelihood or kstep), not 'simulation'")
@@ -1208,7 +1224,8 @@ def _local_fit_options(opt) -> dict:
                 wall_factors=opt.estimation.wall_factors, fit_rows=opt.split.rows,
                 min_t=opt.split.min_t, innovations=opt.estimation.innovations,
                 fast_gain=opt.split.fast_gain,
-                **({"gain_schedule": opt.split.gain_schedule} if opt.split.gain_schedule else {}))
+                **({"gain_schedule": opt.split.gain_schedule} if opt.split.gain_schedule else {}),
+                **({"loop_gain": True} if opt.estimation.loop_gain else {}))
 
 
 def _fitted_network(gb):
@@ -1236,6 +1253,8 @@ def _mass_options(opt) -> dict:
         out["common_gain"] = int(est.common_gain)
     if est.gain_schedule is not None:
         out["gain_schedule"] = est.gain_schedule
+    if est.loop_gain:
+        out["loop_gain"] = True
     if est.noise != "shared" and est.criterion != "simulation":   # "auto": per zone
         out["noise"] = "zone"
     return out

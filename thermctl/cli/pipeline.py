@@ -138,6 +138,12 @@ def identify(
                                       "the gains wander faster (a fitted ratio) in the hours "
                                       "7-19 of every day than at night; none = one pace all "
                                       "day."),
+    loop_gain: bool = typer.Option(_D.estimation.loop_gain, "--loop-gain/--no-loop-gain",
+                                   help="Kalman criteria: a fitted gain [W/K] per zone with "
+                                   "supply air for its control loop acting between samples "
+                                   "(the reading it last saw, held over the step, against the "
+                                   "temperature now), in the rows with the supply on; not part "
+                                   "of the identified model."),
     input_timing: str = typer.Option(_D.estimation.input_timing, "--input-timing",
                                      help="How a row's inputs act on the step after it: held "
                                      "(as logged: samples a controller holds), centred (the "
@@ -285,6 +291,7 @@ def identify(
                                      noise=noise, common_gain=common_gain,
                                      gain_schedule=None if gain_schedule == "none"
                                      else gain_schedule,
+                                     loop_gain=loop_gain,
                                      input_timing=input_timing,
                                      per_edge="auto" if per_edge is None else per_edge,
                                      per_path_p=per_path_p),

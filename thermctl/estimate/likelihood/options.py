@@ -67,6 +67,21 @@ class LikelihoodOptions:
         likelihood is exact within a regime and approximate for the covariance's transient
         after a switch (its time constant is that of the filter, minutes to an hour). Needs
         the random-walk disturbance and timestamps. None (default): one intensity.
+    loop_gain : bool
+        A zone's own control loop acting between samples. A VAV box's PI loop acts every
+        minute or faster; the log holds one sample per step, so a row's supply is what the
+        box did at the stamp, and within the step the loop keeps answering the zone's
+        temperature. That is a heat ``k_z·(y_{z,k} − T_z(t))`` [W] over the step: the
+        reading the loop last saw, held, against the temperature now (for a proportional
+        action ``k_z`` is its gain in W/K: a 2 K band on a 0.1 kg/s box at 10 K supply
+        difference is ~500 W/K). ``True``: one ``loop_gain[z]`` per measured zone with
+        supply air, fitted (log scale, 0.01–10⁴ W/K), acting in the rows where any such
+        zone's supply is on. A neighbour's temperature, loop-controlled to a similar set
+        point, resembles the held reading, so without the term an air path to it can stand
+        in for it (docs/identification.md, "A loop between samples"). Two regimes, supply
+        on and off, each with its stationary filter (as ``gain_schedule``, with which it
+        does not combine). The identified building model does not carry it: it describes
+        the data's controller, not the building. False (default): no such term.
     solar : "auto", bool or list of str
         Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
         those zones; False = none.
@@ -190,6 +205,7 @@ class LikelihoodOptions:
     occupied_hours: tuple = (7.0, 19.0)
     weekdays_only: bool = True
     gain_schedule: str | None = None
+    loop_gain: bool = False
     solar: object = "auto"
     noise: str = "shared"
     burn_in: float = 6 * 3600.0
@@ -244,6 +260,11 @@ class LikelihoodOptions:
         if self.gain_schedule is not None and self.disturbance != "random_walk":
             raise EstimationError("gain_schedule needs disturbance='random_walk' (it scales the "
                                   "random-walk gains' noise in occupied hours)")
+        if self.loop_gain not in (False, True):
+            raise EstimationError(f"loop_gain must be True or False, found {self.loop_gain!r}")
+        if self.loop_gain and self.gain_schedule is not None:
+            raise EstimationError("loop_gain and gain_schedule do not combine (each gives the "
+                                  "filter two regimes of its own); choose one")
         if self.noise not in ("shared", "zone"):
             raise EstimationError(f"noise must be 'shared' or 'zone', found {self.noise!r}")
         if self.initial_state not in ("steady", "paper"):

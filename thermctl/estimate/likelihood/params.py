@@ -35,6 +35,7 @@ GROUP_UNITS = {
     "loading": "W",
     "tau_c": "s",
     "occ_ratio": "-",
+    "loop_gain": "W/K",
 }
 """Unit of each parameter group."""
 

@@ -169,6 +169,17 @@ class LikelihoodProblem:
                 self.d_sup[i] = mbar * self.sym.kz[i]
                 heat[:, i] += ms[:, i] * cp * Ts[:, i] - (ms[:, i] - mbar) * cp * Tref
         self.W0 = np.vstack([heat.T * _KW, Tb.T])                         # (nw, N)
+        # loop_gain: the measured zones with supply air (measured index), and the rows in
+        # which any of them has it on (their loops act there)
+        self.loop_zones = []
+        self.on_rows = np.zeros(N, dtype=bool)
+        if opt.loop_gain:
+            self.loop_zones = [j for j, i in enumerate(self.meas) if np.any(ms[valid, i] > 1e-9)]
+            if self.loop_zones:
+                cols = [self.meas[j] for j in self.loop_zones]
+                self.on_rows = np.any(ms[:, cols] > 1e-9, axis=1)
+            else:
+                log.info("loop_gain: no measured zone has supply air; no loop term")
         self.fit_rows = self._fit_rows(ms)
         self.valid = valid & np.isfinite(self.W0).all(axis=0)
         # deterministic basis rows: solar columns, then time-of-day functions
@@ -360,6 +371,10 @@ class LikelihoodProblem:
         self.i_occ = None       # occupied-hours ratio of the gains' noise intensity
         if opt.gain_schedule is not None:
             self.i_occ = lay.add(Param("occ_ratio", "occ_ratio", True, 2.0, 1e-2, 1e3))
+        # loop gain per measured zone with supply air [W/K]; its lower bound is no loop at
+        # all for a zone (0.01 W/K against walls and air paths of 10-100 W/K)
+        self.i_loop = [lay.add(Param(f"loop_gain[{self.zones[self.meas[j]]}]", "loop_gain", True,
+                                     10.0, 1e-2, 1e4)) for j in self.loop_zones]
         if self.n_b:
             self.i_sigb = lay.add(Param("sigma_b", "sigma_b", True, 0.2, 1e-3, 5.0))
             self.i_taub = lay.add(Param("tau_b", "tau_b", True, 3600.0, 300.0, 86400.0))
@@ -454,7 +469,7 @@ class LikelihoodProblem:
         n_tot = sum(b - a for a, b in segs)
         L = 2 ** int(round(math.log2(max(math.sqrt(n_tot), 4.0))))
         L = int(min(max(L, 8), 256))
-        if opt.gain_schedule is not None:
+        if opt.gain_schedule is not None or self.i_loop:
             # about an hour of rows: a chunk whose regime changes is chained step by step,
             # so short chunks keep most of them in one regime (twin house, 10-min data:
             # 120 ms an evaluation with 8 rows, 149 ms with 64)
@@ -482,8 +497,10 @@ class LikelihoodProblem:
         # regime (0, or 1 in occupied hours) of every row and layout column
         self.row_regime = np.zeros(len(self.valid), dtype=int)
         self.regime = None
-        if opt.gain_schedule is not None:
-            self.row_regime = self._occupied_rows().astype(int)
+        if opt.gain_schedule is not None or self.i_loop:
+            # regime 1: occupied hours (gain schedule), or the supply on (loop gain)
+            self.row_regime = (self._occupied_rows() if opt.gain_schedule is not None
+                               else self.on_rows).astype(int)
             self.regime = np.where(live, self.row_regime[np.maximum(tmap, 0)], 0)
         use = np.zeros(L * M, dtype=bool)
         use[live] = self.fit_rows[tmap[live]]
@@ -688,6 +705,9 @@ class LikelihoodProblem:
             p = np.zeros(0)
         A, _ = self.sym.AB(p)
         A = np.asarray(ca.densify(A)) - np.diag(self.d_sup)
+        for j, i in zip(self.loop_zones, self.i_loop):      # every loop at its largest gain
+            z = self.meas[j]
+            A[z, z] -= self.layout.params[i].upper * float(self.sym.inv_cz[z])
         if self.i_ua:      # every class at its largest conductance
             hi = self.options.ua_factor_bounds[1]
             A = A + sum((hi - 1.0) * Ak.toarray() for Ak, _ in self.ua_mats)
@@ -698,8 +718,12 @@ class LikelihoodProblem:
         eta = ca.MX.sym("eta", npar)
         A, B, Sig, R = self._continuous(eta)
         self.squarings = kalman.n_squarings(self._norm_bound())
-        sched = self.regime is not None
+        two = self.regime is not None          # two regimes: gain schedule or loop gain
+        sched = self.i_occ is not None
+        loop = bool(self.i_loop)
         Phi, Gam, Qd = kalman.discretize(A, B, Sig, self.data.dt, self.squarings)
+        if loop:
+            Phi1, Gam1, GamY, Qd1 = self._loop_discretized(A, B, Sig, eta)
         if sched:
             # in occupied hours the random-walk gains' increments over a step have
             # ratio × their variance σ_φ²·dt: the excess enters the gain states at the
@@ -740,12 +764,27 @@ class LikelihoodProblem:
             F = ca.horzcat(F, Phi - ca.mtimes(PhiK1, C))
             X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L, self.regime)
             occ_extra = [P1, S1, Kf1, Qd_occ]
+        elif loop:
+            # supply on: the loops' dynamics and the held readings as inputs, a stationary
+            # filter of their own; each row steps and is scored in its regime
+            P1, S1, Kf1, _ = kalman.stationary_filter(Phi1, C, Qd1, R,
+                                                      self.options.sda_iterations, self._dare)
+            PhiK1 = ca.mtimes(Phi1, Kf1)
+            cols1 = self.regime.astype(float)
+            on_w = ca.DM(np.tile(cols1, (self.nw, 1)))
+            GZ = dense_mtimes(Gam, W * (1.0 - on_w)) + dense_mtimes(Gam1, W * on_w) \
+                + dense_mtimes(GamY, ca.DM(self.Y_lay * cols1)) \
+                + dense_mtimes(PhiK, ca.DM(self.Y_lay * (1.0 - cols1))) \
+                + dense_mtimes(PhiK1, ca.DM(self.Y_lay * cols1))
+            F = ca.horzcat(F, Phi1 - ca.mtimes(PhiK1, C))
+            X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L, self.regime)
+            occ_extra = [P1, S1, Kf1, Qd1, Phi1, Gam1, GamY]
         else:
             GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay))
             X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L)
         E = ca.DM(self.Y_lay) - ca.mtimes(C, X)
         Em = E * ca.DM(np.tile(self.mask, (self.ny, 1)))
-        if sched:
+        if two:
             E0 = Em * ca.DM(np.tile(1.0 - cols1, (self.ny, 1)))
             E1 = Em * ca.DM(np.tile(cols1, (self.ny, 1)))
             quad_cols = ca.sum1(E0 * ca.solve(S, E0)) + ca.sum1(E1 * ca.solve(S1, E1))
@@ -786,11 +825,37 @@ class LikelihoodProblem:
         self.matrices_fn = ca.Function(
             "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change] + occ_extra,
             ["eta"], ["A", "B", "Sigma", "R", "Phi", "Gamma", "Qd", "P", "S", "Kf", "X0",
-                      "Theta", "change"] + (["P_occ", "S_occ", "Kf_occ", "Qd_occ"] if sched else []))
+                      "Theta", "change"]
+            + (["P_occ", "S_occ", "Kf_occ", "Qd_occ"] if sched else [])
+            + (["P_on", "S_on", "Kf_on", "Qd_on", "Phi_on", "Gamma_on", "Gamma_y"] if loop else []))
         self._hess = {}
         self._kstep_expr = None
-        self._kstep_parts = (X, E, (Kf, Kf1) if sched else Kf, Phi, Gam, C, ThB_full) \
-            if self.n_restarts else None
+        self._kstep_parts = (X, E, (Kf, Kf1) if two else Kf, Phi, Gam, C, ThB_full,
+                             (Phi1, Gam1, GamY) if loop else None) if self.n_restarts else None
+
+    def _loop_discretized(self, A, B, Sig, eta):
+        """``(Phi_on, Gamma_on, Gamma_y, Qd_on)``: the model with the supply on, each loop's
+        ``k_z·(y_z − T_z)`` added, discretised over the step with the reading ``y_z`` held.
+
+        The loop term moves ``k_z·inv_cz`` [1/s] into the zone's diagonal of ``A`` (with
+        ``internal_mass``, divided by its factor like every term of its equation) and the
+        same into an input column for the held reading; ``Gamma_y`` maps the readings of
+        every measured zone (zero columns for zones without a loop).
+        """
+        inv_f = self._inv_factor(eta)
+        By = ca.MX(self.n, self.ny)
+        for j, i in zip(self.loop_zones, self.i_loop):
+            z = self.meas[j]
+            c = ca.exp(eta[i]) * float(self.sym.inv_cz[z])
+            if inv_f is not None:
+                c = c * inv_f[z]
+            By[z, j] = c
+        Cz = np.zeros((self.ny, self.n))
+        Cz[np.arange(self.ny), self.meas] = 1.0
+        A_on = A - ca.mtimes(By, ca.DM(Cz))
+        Phi1, GG, Qd1 = kalman.discretize(A_on, ca.horzcat(B, By), Sig, self.data.dt,
+                                          self.squarings)
+        return Phi1, GG[:, :self.nw], GG[:, self.nw:], Qd1
 
     @property
     def _kstep(self):
@@ -812,7 +877,7 @@ class LikelihoodProblem:
             self._kstep_grad_buf = BufferedFunction(self.kstep_grad_fn)
         return self._kstep_expr
 
-    def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full):
+    def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full, on=None):
         LM = self.L * self.M
         R = self.n_restarts
         rows = np.array([self.pos[int(t)] for t in self.kstarts])
@@ -837,7 +902,15 @@ class LikelihoodProblem:
             W = ca.DM(self.W0[:, idx]) + _KW * ca.mtimes(ThB_full, ca.DM(self.Bas[:, idx]))
             fb = ca.DM(self.sup_gain[idx].T) * (ca.mtimes(CT, Xh) - ca.DM(self.Tbar[idx].T))
             W = W - ca.mtimes(Sz, fb)
-            Xh = dense_mtimes(Phi, Xh) + dense_mtimes(Gam, W)
+            X0h = dense_mtimes(Phi, Xh) + dense_mtimes(Gam, W)
+            if on is not None:
+                # supply on: the loops answer the predicted temperature held over the step
+                Phi1, Gam1, GamY = on
+                X1h = dense_mtimes(Phi1, Xh) + dense_mtimes(Gam1, W) \
+                    + dense_mtimes(GamY, ca.mtimes(CT, Xh))
+                r1 = ca.DM(np.tile(self.row_regime[idx].astype(float), (self.n, 1)))
+                X0h = X0h + (X1h - X0h) * r1
+            Xh = X0h
             err = ca.DM(self.Y[self.kstarts + i].T) - ca.mtimes(C, Xh)
             J = J + ca.sumsqr(err)
         return J
