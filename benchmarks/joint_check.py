@@ -22,7 +22,7 @@ import time
 import warnings
 
 from thermctl.data import read_measurements
-from thermctl.identify import IdentifyOptions, _local_fit_options
+from thermctl.identify import IdentifyOptions
 from thermctl.local import identify_local, joint_local
 from thermctl.testbed import generate
 
@@ -37,7 +37,7 @@ def main(argv=None):
                     help="common gains in the joint problems (default 0)")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
-    kw = _local_fit_options(IdentifyOptions())     # what identify asks every local fit
+    kw = IdentifyOptions().local_fit_options()     # what identify asks every local fit
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate("corridor", zones=args.zones, days=args.days, seed=args.seed)

@@ -86,6 +86,7 @@ LOCAL_CANDIDATES = SplitOptions().candidates   # --local-candidates (the default
 GAIN_SCHEDULE = SplitOptions().gain_schedule    # --gain-schedule
 JOINT = SplitOptions().joint                    # --joint
 LOOP_GAIN = EstimationOptions().loop_gain        # --loop-gain
+LOCAL_ROWS = SplitOptions().rows                 # --local-rows
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -216,7 +217,8 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
     opt = IdentifyOptions(estimation=EstimationOptions(intervals="none", loop_gain=LOOP_GAIN),
                           split=SplitOptions(scale=scale, workers=workers,
                                              candidates=LOCAL_CANDIDATES,
-                                             gain_schedule=GAIN_SCHEDULE, joint=JOINT))
+                                             gain_schedule=GAIN_SCHEDULE, joint=JOINT,
+                                             rows=LOCAL_ROWS))
     last = {"t": 0.0}
     t_start = time.perf_counter()
 
@@ -456,8 +458,12 @@ def main(argv=None) -> Result:
     ap.add_argument("--loop-gain", action="store_true",
                     help="estimation.loop_gain: a fitted gain per zone with supply air for its "
                          "loop acting between samples")
+    ap.add_argument("--local-rows", choices=("all", "auto", "supply_off"), default=LOCAL_ROWS,
+                    help="split.rows: the samples whose innovations count in the local "
+                         f"likelihoods (default {LOCAL_ROWS})")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
     args = ap.parse_args(argv)
+    globals()["LOCAL_ROWS"] = args.local_rows
     globals()["JOINT"] = args.joint
     globals()["LOOP_GAIN"] = args.loop_gain
     globals()["LOCAL_CANDIDATES"] = args.local_candidates

@@ -191,3 +191,28 @@ def test_identify_carries_the_fitted_wall_factors_into_the_model():
     for w in tb.spec.walls:
         k = f[wall_class(w.a, w.b, zones)]
         assert np.allclose(np.asarray(fitted[w.name].R) * k, w.R, rtol=1e-9), w.name
+
+
+def test_loop_gain_without_supply_air_says_so():
+    """``estimation.loop_gain`` on data with no supply flow: nothing is fitted, and the
+    identification says why instead of staying silent; with supply air there is no such
+    note and the fit carries one gain per zone with a box."""
+    import warnings
+
+    from thermctl.data import read_measurements
+    from thermctl.identify import identify
+    from thermctl.testbed import generate
+    tb = generate("pugh-hall", days=10, seed=0)         # SIN's neighbourhoods need 8 days
+    frame = tb.data.drop(columns=[c for c in tb.data.columns if c.startswith(("ms:", "Ts:"))])
+    opt = IdentifyOptions(selection=SelectionOptions(method="scores"),
+                          estimation=EstimationOptions(loop_gain=True, intervals="none"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dry = identify(read_measurements(frame, tb.spec, name="no supply"), opt)
+        wet = identify(read_measurements(tb.data, tb.spec, name="supply"), opt)
+    said = [n for n in dry.notes if n.startswith("--loop-gain")]
+    assert len(said) == 1 and "no measured zone has supply air" in said[0]
+    assert not any(k.startswith("loop_gain[") for k in dry.greybox.params_)
+    assert not any(n.startswith("--loop-gain") for n in wet.notes)
+    boxes = {k for k in wet.greybox.params_ if k.startswith("loop_gain[")}
+    assert boxes and len(boxes) <= len(tb.spec.measured_zones)

@@ -593,6 +593,24 @@ class IdentifyOptions:
             return False
         return self.split.splits(len(spec.measured_zones))
 
+    def local_fit_options(self) -> dict:
+        """What every local fit is asked: :func:`thermctl.local.fit_local`'s keywords, one
+        place for the local path, ``identify_many``, the stability resamples and scripts that
+        fit local problems themselves.
+
+        Examples
+        --------
+        >>> IdentifyOptions().local_fit_options()["min_t"]
+        2.0
+        """
+        est, split = self.estimation, self.split
+        return dict(criterion=self.selection.criterion, margin=self.selection.margin,
+                    solar=est.solar, internal_mass=est.internal_mass,
+                    wall_factors=est.wall_factors, fit_rows=split.rows, min_t=split.min_t,
+                    innovations=est.innovations, fast_gain=split.fast_gain,
+                    **({"gain_schedule": split.gain_schedule} if split.gain_schedule else {}),
+                    **({"loop_gain": True} if est.loop_gain else {}))
+
     @property
     def paper(self) -> bool:
         """The paper's pipeline (simulation criterion, SIN-score selection)."""
@@ -675,6 +693,12 @@ def identify(meas: Measurements, options: IdentifyOptions | None = None,
     if flows:
         ident.notes.append("directed flows (inputs, from the spec): " + ", ".join(
             f"{f.src} → {f.dst} ({f.fraction:g} × {f.rate_column})" for f in flows))
+    if opt.estimation.loop_gain:
+        fr = cal.frame
+        if not any(f"ms:{z}" in fr and (fr[f"ms:{z}"] > 1e-9).any()
+                   for z in meas.spec.measured_zones):
+            ident.notes.append("--loop-gain: no measured zone has supply air (no ms: column "
+                               "with a flow), so no loop gain was fitted")
     # --workers runs a whole building's trial fits in threads and its stability
     # resamples in processes; a scheduler serves local problems only
     if not local and (client is not None or opt.split.scheduler):
@@ -899,7 +923,7 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
     from .local import identify_local
 
     li = identify_local(meas.spec, cal.frame, rule=opt.split.combine,
-                        workers=opt.split.workers, **_local_fit_options(opt),
+                        workers=opt.split.workers, **opt.local_fit_options(),
                         client=client or opt.split.scheduler, progress=progress,
                         latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
@@ -1068,11 +1092,11 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             owner += [k] * len(ps)
         t0 = _time.perf_counter()
         results = run_local(problems, frames, workers=opt.split.workers, client=client,
-                            progress=progress, **_local_fit_options(opt)) if problems else []
+                            progress=progress, **opt.local_fit_options()) if problems else []
         if problems and opt.split.confirm and opt.split.combine == "both":
             results = confirm_local(problems, results, frames, workers=opt.split.workers,
                                     client=client, progress=progress, groups=owner,
-                                    **_local_fit_options(opt))
+                                    **opt.local_fit_options())
         wall = _time.perf_counter() - t0
         out = {}
         for k in local:
@@ -1084,7 +1108,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
                 # one building's pairs at a time: its joint problems read its own table
                 li = joint_local(items[k].spec, cal.frame, li, workers=opt.split.workers,
                                  client=client, progress=progress,
-                                 latent_depth=opt.split.latent_depth, **_local_fit_options(opt))
+                                 latent_depth=opt.split.latent_depth, **opt.local_fit_options())
             out[k] = _finish_local(items[k], cal, val, opts[k], li, progress, client)
             if timing[k]:
                 out[k].notes.insert(0, timing[k])
@@ -1107,7 +1131,7 @@ def _local_stability(li, cal, opt, progress, client, notes):
                            seed=opt.selection.stability_seed, rule=li.rule,
                            workers=opt.split.workers, client=client or opt.split.scheduler,
                            progress=progress, confirm=opt.split.confirm,
-                           **_local_fit_options(opt))
+                           **opt.local_fit_options())
     dropped = stab.below(li.edges, thr)
     stab.dropped = dropped
     _stability_short_note(stab, notes)
@@ -1214,18 +1238,6 @@ def _threads(opt) -> int:
     """Threads for a whole building's trial fits: ``--workers`` (default every core)."""
     from ._parallel import worker_count
     return worker_count(opt.split.workers)
-
-
-def _local_fit_options(opt) -> dict:
-    """What every local fit is asked (:func:`thermctl.local.fit_local`'s keywords), one place
-    for the local path, ``identify_many`` and the stability resamples."""
-    return dict(criterion=opt.selection.criterion, margin=opt.selection.margin,
-                solar=opt.estimation.solar, internal_mass=opt.estimation.internal_mass,
-                wall_factors=opt.estimation.wall_factors, fit_rows=opt.split.rows,
-                min_t=opt.split.min_t, innovations=opt.estimation.innovations,
-                fast_gain=opt.split.fast_gain,
-                **({"gain_schedule": opt.split.gain_schedule} if opt.split.gain_schedule else {}),
-                **({"loop_gain": True} if opt.estimation.loop_gain else {}))
 
 
 def _fitted_network(gb):
@@ -1368,7 +1380,7 @@ def _resolve_input_timing(meas, cal, val, opt, progress=None):
             zones[int(i)] for i in np.unique(np.linspace(
                 0, len(zones) - 1, min(TIMING_PROBLEMS, len(zones))).round())],
             latent_depth=opt.split.latent_depth)
-        kw = {k: v for k, v in _local_fit_options(opt).items() if k != "margin"}
+        kw = {k: v for k, v in opt.local_fit_options().items() if k != "margin"}
         bic = []
         for k, data in enumerate((cal, ccal)):
             with warnings.catch_warnings():

@@ -78,10 +78,14 @@ class LikelihoodOptions:
         supply air, fitted (log scale, 0.01–10⁴ W/K), acting in the rows where any such
         zone's supply is on. A neighbour's temperature, loop-controlled to a similar set
         point, resembles the held reading, so without the term an air path to it can stand
-        in for it (docs/identification.md, "A loop between samples"). Two regimes, supply
-        on and off, each with its stationary filter (as ``gain_schedule``, with which it
-        does not combine). The identified building model does not carry it: it describes
-        the data's controller, not the building. False (default): no such term.
+        in for it. Two regimes, supply on and off, each with its stationary filter (as
+        ``gain_schedule``, with which it does not combine). The identified building model
+        does not carry it: it describes the data's controller, not the building. Measured
+        (docs/identification.md, "A loop between samples"): a pull toward the last reading
+        is also what the filter's correction does, so the fitted gain is confounded with
+        the heat noise (Pugh Hall with its boxes acting at the data step still fits 1 300–
+        1 800 W/K in three of six zones), and on the corridor floors it traded 2 false air
+        paths for 3 true ones at 1.9× the CPU. False (default): no such term.
     solar : "auto", bool or list of str
         Solar apertures: ``auto``/True = every zone × every ``solar:`` column; a list =
         those zones; False = none.
