@@ -752,33 +752,29 @@ class LikelihoodProblem:
         ThB_full = ca.vertcat(ThB, ca.MX(self.nb, ThB.shape[1]))
         W = ca.DM(self.W0_lay) + _KW * ca.mtimes(ThB_full, ca.DM(self.B_lay))
         occ_extra = []
-        if sched:
-            # a second stationary filter for the occupied hours; each row runs on its
-            # regime's gain, each column's innovation is scored with its regime's S
-            P1, S1, Kf1, _ = kalman.stationary_filter(Phi, C, Qd_occ, R,
-                                                      self.options.sda_iterations, self._dare)
-            PhiK1 = ca.mtimes(Phi, Kf1)
-            cols1 = self.regime.astype(float)
-            GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay * (1.0 - cols1))) \
-                + dense_mtimes(PhiK1, ca.DM(self.Y_lay * cols1))
-            F = ca.horzcat(F, Phi - ca.mtimes(PhiK1, C))
-            X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L, self.regime)
-            occ_extra = [P1, S1, Kf1, Qd_occ]
-        elif loop:
-            # supply on: the loops' dynamics and the held readings as inputs, a stationary
-            # filter of their own; each row steps and is scored in its regime
+        if two:
+            # a second stationary filter, for the occupied hours (gain schedule: the same
+            # dynamics, more gain noise) or the supply on (loop gain: the loops' dynamics and
+            # the held readings as inputs); each row steps on its regime's matrices and gain,
+            # each column's innovation is scored with its regime's S
+            if sched:
+                Phi1, Qd1 = Phi, Qd_occ
             P1, S1, Kf1, _ = kalman.stationary_filter(Phi1, C, Qd1, R,
                                                       self.options.sda_iterations, self._dare)
             PhiK1 = ca.mtimes(Phi1, Kf1)
             cols1 = self.regime.astype(float)
-            on_w = ca.DM(np.tile(cols1, (self.nw, 1)))
-            GZ = dense_mtimes(Gam, W * (1.0 - on_w)) + dense_mtimes(Gam1, W * on_w) \
-                + dense_mtimes(GamY, ca.DM(self.Y_lay * cols1)) \
-                + dense_mtimes(PhiK, ca.DM(self.Y_lay * (1.0 - cols1))) \
+            GZ = dense_mtimes(PhiK, ca.DM(self.Y_lay * (1.0 - cols1))) \
                 + dense_mtimes(PhiK1, ca.DM(self.Y_lay * cols1))
+            if sched:
+                GZ = GZ + dense_mtimes(Gam, W)
+                occ_extra = [P1, S1, Kf1, Qd_occ]
+            else:
+                on_w = ca.DM(np.tile(cols1, (self.nw, 1)))
+                GZ = GZ + dense_mtimes(Gam, W * (1.0 - on_w)) + dense_mtimes(Gam1, W * on_w) \
+                    + dense_mtimes(GamY, ca.DM(self.Y_lay * cols1))
+                occ_extra = [P1, S1, Kf1, Qd1, Phi1, Gam1, GamY]
             F = ca.horzcat(F, Phi1 - ca.mtimes(PhiK1, C))
             X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L, self.regime)
-            occ_extra = [P1, S1, Kf1, Qd1, Phi1, Gam1, GamY]
         else:
             GZ = dense_mtimes(Gam, W) + dense_mtimes(PhiK, ca.DM(self.Y_lay))
             X = kalman.chunked_recursion(F, GZ, X0, self.restart, self.L)
