@@ -23,6 +23,7 @@ from thermctl.estimate import EstimationData
 from thermctl.estimate.likelihood import (LikelihoodEstimator, LikelihoodOptions, LikelihoodProblem,
                               identifiability, kstep_errors)
 from thermctl.estimate.likelihood import kalman
+from thermctl.estimate.likelihood.kstep import filtered_states
 from thermctl.selection import select_air_paths
 from thermctl.structure.search import candidate_pairs
 from thermctl.estimate.likelihood.uncertainty import hessian_fd, wald_intervals
@@ -317,17 +318,21 @@ def test_loop_gain_is_a_held_reading_answered_over_the_step(sim5, net5):
     W = lo.inputs(eta)
     mats = {0: (m["Phi"], m["Gamma"], np.zeros_like(m["Gamma_y"]), m["Kf"], m["S"]),
             1: (m["Phi_on"], m["Gamma_on"], m["Gamma_y"], m["Kf_on"], m["S_on"])}
-    nll = 0.0
+    nll, innov = 0.0, []
     for s, (a, b) in enumerate(lo.segments):
         x = m["X0"][:, s].copy()
         for t in range(a, b):
             Phi, Gam, Gy, K, S = mats[lo.row_regime[t]]
             e = data.Y[t] - lo.C @ x
+            innov.append(e)
             if t - a >= lo.burn and lo.fit_rows[t]:
                 nll += 0.5 * (e @ np.linalg.solve(S, e) + np.log(np.linalg.det(S))
                               + lo.ny * kalman.LOG2PI)
             x = Phi @ (x + K @ e) + Gam @ W[t] + Gy @ data.Y[t]
     assert lo.nll(eta) == pytest.approx(nll, rel=1e-10)
+    # the numpy filter of the k-step errors and the prediction test runs the same regimes
+    E = np.vstack([out[4] for out in filtered_states(lo, eta)])
+    np.testing.assert_allclose(E, np.array(innov), rtol=0, atol=1e-10)
     e0 = eta.copy()
     for name in names:
         e0[lo.layout.index(name)] = np.log(1e-2)
@@ -346,6 +351,16 @@ def test_loop_gain_is_a_held_reading_answered_over_the_step(sim5, net5):
     # criterion is the model's without them
     assert lo.kstep(e0) == pytest.approx(base.kstep(base.layout.eta0()), rel=1e-5)
     assert lo.kstep(eta) != pytest.approx(lo.kstep(e0), rel=1e-3)
+    # the CasADi k-step criterion and the numpy k-step errors are the same predictions: with
+    # (rows after the burn-in) ≡ 1 mod the stride both restart at the same rows
+    H = lo.H
+    n = len(data) - ((len(data) - lo.burn - 1) % H)
+    cut = EstimationData.from_arrays(net5, data.U[:n], data.Y[:n], DT)
+    lc = LikelihoodProblem(net5, cut, lo.options)
+    assert list(lc.kstarts) == list(range(lc.burn, n - H, H))
+    ks = kstep_errors(lc, eta, horizons=[DT * i for i in range(1, H + 1)], stride=H * DT)
+    assert lc.kstep(eta) == pytest.approx(float((ks.rmse ** 2 * ks.n[:, None]).sum()),
+                                          rel=1e-9)
     with pytest.raises(EstimationError, match="do not combine"):
         LikelihoodOptions(loop_gain=True, gain_schedule="occupied").check()
 

@@ -61,6 +61,18 @@ class KStepResult:
         return "\n".join(rows)
 
 
+def _regime_matrices(m):
+    """Per filter regime (0, 1): ``(Phi, Gamma, Gamma_y or None, Kf)`` from
+    :meth:`LikelihoodProblem.matrices`: one regime, the gain schedule's (its own gain), or the
+    loop gain's (its own dynamics, gain and held-reading input ``Gamma_y``)."""
+    r0 = (m["Phi"], m["Gamma"], None, m["Kf"])
+    if "Kf_on" in m:
+        return r0, (m["Phi_on"], m["Gamma_on"], m["Gamma_y"], m["Kf_on"])
+    if "Kf_occ" in m:
+        return r0, (m["Phi"], m["Gamma"], None, m["Kf_occ"])
+    return r0, r0
+
+
 def filtered_states(problem, eta):
     """Run the stationary filter of ``problem`` at ``eta`` in numpy.
 
@@ -72,9 +84,10 @@ def filtered_states(problem, eta):
     """
     m = problem.matrices(eta)
     W = problem.inputs(eta)
-    Phi, Gam, C = m["Phi"], m["Gamma"], problem.C
-    # the gain of each row's regime (one regime unless gain_schedule is set)
-    gains = (m["Kf"], m.get("Kf_occ", m["Kf"]))
+    C = problem.C
+    # each row steps on its regime's matrices and gain (one regime unless gain_schedule or
+    # loop_gain is set)
+    mats = _regime_matrices(m)
     reg = problem.row_regime
     out = []
     with single_thread_blas():
@@ -84,12 +97,15 @@ def filtered_states(problem, eta):
             Xf = np.empty((b - a, problem.n))
             E = np.empty((b - a, problem.ny))
             for k in range(a, b):
+                Phi, Gam, Gy, K = mats[reg[k]]
                 e = problem.Y[k] - C @ x
                 Xp[k - a] = x
-                x = x + gains[reg[k]] @ e
+                x = x + K @ e
                 Xf[k - a] = x
                 E[k - a] = e
                 x = Phi @ x + Gam @ W[k]
+                if Gy is not None:          # the loops' held readings
+                    x += Gy @ problem.Y[k]
             out.append((a, b, Xp, Xf, E))
     return out
 
@@ -156,13 +172,12 @@ def _kstep_sums(problem, eta, horizons, stride, rows, block):
     N = len(problem.Y)
     per = N + 1 if block is None else max(1, int(round(block / dt)))
     nb = N // per + 1
-    m = problem.matrices(eta)
     W = problem.inputs(eta)
-    Phi, Gam, C = m["Phi"], m["Gamma"], problem.C
+    (Phi, Gam, _, _), (Phi1, Gam1, Gy1, _) = _regime_matrices(problem.matrices(eta))
+    C = problem.C
     ny = problem.ny
     meas = problem.meas
-    CT = np.zeros((ny, problem.n))
-    CT[np.arange(ny), meas] = 1.0
+    CT = problem.zone_pick
     sse = np.zeros((len(hs), nb, ny))
     se = np.zeros((len(hs), nb, ny))
     cnt = np.zeros((len(hs), nb), dtype=int)
@@ -181,7 +196,12 @@ def _kstep_sums(problem, eta, horizons, stride, rows, block):
                 Wj = W[idc].T.copy()
                 fb = problem.sup_gain[idc].T * (CT @ X - problem.Tbar[idc].T)
                 Wj[meas] -= fb
-                X = Phi @ X + Gam @ Wj
+                Xn = Phi @ X + Gam @ Wj
+                if Gy1 is not None:
+                    # supply on: the loops answer the predicted temperature held over the step
+                    on = problem.row_regime[idc] == 1
+                    Xn[:, on] = Phi1 @ X[:, on] + Gam1 @ Wj[:, on] + Gy1 @ (CT @ X[:, on])
+                X = Xn
                 for q in np.flatnonzero(hs == j):
                     tgt = starts + j
                     ok = live & (tgt < b)

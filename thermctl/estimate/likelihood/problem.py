@@ -733,8 +733,7 @@ class LikelihoodProblem:
             gsel = np.zeros(self.n)
             gsel[self.n_net:self.n_net + self.n_d] = self.data.dt
             Qd_occ = Qd + (ca.exp(eta[self.i_occ]) - 1.0) * ca.diag(ca.diag(Sig) * ca.DM(gsel))
-        C = np.zeros((self.ny, self.n))
-        C[np.arange(self.ny), self.meas] = 1.0
+        C = self.zone_pick
         if self.n_e:
             C[np.arange(self.ny), self.n_net + self.n_d + np.arange(self.ny)] = 1.0
         self.C = C
@@ -846,9 +845,7 @@ class LikelihoodProblem:
             if inv_f is not None:
                 c = c * inv_f[z]
             By[z, j] = c
-        Cz = np.zeros((self.ny, self.n))
-        Cz[np.arange(self.ny), self.meas] = 1.0
-        A_on = A - ca.mtimes(By, ca.DM(Cz))
+        A_on = A - ca.mtimes(By, ca.DM(self.zone_pick))
         Phi1, GG, Qd1 = kalman.discretize(A_on, ca.horzcat(B, By), Sig, self.data.dt,
                                           self.squarings)
         return Phi1, GG[:, :self.nw], GG[:, self.nw:], Qd1
@@ -890,9 +887,7 @@ class LikelihoodProblem:
         Sz = np.zeros((self.nw, self.ny))
         Sz[self.meas, np.arange(self.ny)] = 1.0
         Sz = ca.DM(Sz)
-        CT = np.zeros((self.ny, self.n))
-        CT[np.arange(self.ny), self.meas] = 1.0
-        CT = ca.DM(CT)
+        CT = ca.DM(self.zone_pick)
         for i in range(1, self.H + 1):
             idx = self.kstarts + i - 1
             W = ca.DM(self.W0[:, idx]) + _KW * ca.mtimes(ThB_full, ca.DM(self.Bas[:, idx]))
@@ -912,6 +907,14 @@ class LikelihoodProblem:
         return J
 
     # ------------------------------------------------------------------ numeric API
+    @property
+    def zone_pick(self) -> np.ndarray:
+        """(ny, n) selection of the measured zones' air temperatures among the states (the
+        temperatures themselves: without the sensor-error states that ``C`` adds)."""
+        P = np.zeros((self.ny, self.n))
+        P[np.arange(self.ny), self.meas] = 1.0
+        return P
+
     @property
     def n_kstep(self) -> int:
         """Scalar errors in the k-step criterion."""
