@@ -96,6 +96,23 @@ def test_validate_and_report(identified, tb_dir):
     assert "data:image/png;base64," in html and "Step-response error" in html
 
 
+def test_validate_leaves_kstep_out_above_the_state_limit_and_says_so(identified, tb_dir, tmp_path,
+                                                                    monkeypatch):
+    import thermctl.validate as V
+
+    monkeypatch.setattr(V, "KSTEP_MAX_STATES", 10)      # this model has more states
+    res = run("validate", identified / "model.json", tb_dir / "data.csv", "--hours", 24,
+              "--out", tmp_path)
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "validation.json").read_text())
+    assert doc["kstep_rmse"] == {}
+    assert len(doc["notes"]) == 1 and "not computed" in doc["notes"][0] and "--kstep" in doc["notes"][0]
+    assert "k-step-ahead errors: not computed" in " ".join(res.output.split())
+    assert any(b["title"] == "Not computed" for b in doc["report"])
+    # without k-step errors the testbed truth still decides, as with --no-kstep
+    assert doc["verdict"]["basis"] == "truth"
+
+
 def test_export_roundtrip(identified, tmp_path):
     from thermctl.io import load_statespace
     res = run("export", identified / "model.json", "--statespace", tmp_path / "ss.npz",
