@@ -123,6 +123,20 @@ def test_export_roundtrip(identified, tmp_path):
     assert np.all(np.abs(np.linalg.eigvals(sys.A)) < 1.0)  # a stable discrete system
 
 
+def test_export_says_why_a_local_model_has_no_kalman_filter(identified, tmp_path):
+    # a large building's model: R̄_v from local problems, no whole-building noise model
+    doc = json.loads((identified / "model.json").read_text())
+    doc["meta"].pop("greybox", None)
+    doc["meta"]["local"] = {"rule": "both", "problems": []}
+    (tmp_path / "model.json").write_text(json.dumps(doc))
+    res = run("export", tmp_path / "model.json", "--statespace", tmp_path / "ss.npz",
+              "--op", "ms=0.05", "--op", "Ts=14", "--op", "T=10")
+    assert res.exit_code == 0, res.output
+    out = " ".join(res.output.split())
+    assert "no Kalman filter exported" in out and "local problems" in out
+    assert "--criterion simulation" not in out
+
+
 def _write_csv(path, text):
     path.write_text(text)
     return path

@@ -161,6 +161,26 @@ def test_disturbance_inputs_and_kalman_filter_exported(model_json, data_csv, tmp
     assert doc["operating_point"]["inputs"]["ms"]["r1"] == pytest.approx(0.04)
 
 
+def test_describe_summarises_a_long_input_and_lists_a_short_one(small_model):
+    from thermctl.export import export_point
+    from thermctl.export import point as P
+
+    pt = export_point(small_model, {"ms": 0.05, "Ts": 14.0, "T": {"*": 10.0, "outside": -5.0}})
+    full = pt.describe()
+    nz = small_model.network.n_zones
+    assert full.count("(given)") == 2 * nz + 2           # ms, Ts per zone, T per boundary node
+    short = pt.describe(max_nodes=2)
+    ms_line = next(line for line in short.splitlines() if line.startswith("  ms"))
+    assert ms_line.startswith(f"  ms [kg/s]: {nz} nodes, 0.05 to 0.05 (median 0.05), {nz} given")
+    assert ms_line.count("=") == 3 and "every value in the exported file" in ms_line
+    t_line = next(line for line in short.splitlines() if line.startswith("  T "))
+    assert t_line == "  T [°C]: outside=-5 (given), ground=10 (given)"   # 2 nodes: listed
+    t_one = next(line for line in pt.describe(max_nodes=1).splitlines() if line.startswith("  T "))
+    assert t_one.startswith("  T [°C]: 2 nodes, -5 to 10 (median 2.5), 2 given")
+    assert P.DESCRIBE_NODES >= nz                       # a small building is listed in full
+    assert pt.to_dict()["inputs"]["ms"] == {z: 0.05 for z in small_model.network.zones}
+
+
 def test_model_without_noise_model_says_so(small_network, tmp_path):
     save_model(ThermalModel(small_network), tmp_path / "m.json")
     res = run("export", tmp_path / "m.json", "--statespace", tmp_path / "ss.npz", "--op", "T=5")

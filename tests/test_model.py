@@ -319,6 +319,18 @@ def test_make_stepper_and_zoh(small_model):
     np.testing.assert_allclose(rad, exact, atol=1e-7)
 
 
+@pytest.mark.parametrize("m", [3, 40])      # fewer inputs than states, and more
+def test_zoh_with_an_input_matrix_is_gamma_times_b(small_model, m):
+    A_u, _ = small_model.affine(small_model.network.input_vector(ms=0.05, Ts=16.0, T=0.0))
+    n = A_u.shape[0]
+    B = np.random.default_rng(m).normal(size=(n, m))
+    Phi, Gamma = zoh(A_u, 900.0)
+    Phi_b, GB = zoh(A_u, 900.0, B)
+    assert GB.shape == (n, m)
+    np.testing.assert_allclose(Phi_b, Phi, rtol=1e-11, atol=1e-12)      # measured 1.6e-13
+    np.testing.assert_allclose(GB, Gamma @ B, rtol=1e-9, atol=1e-11 * np.abs(Gamma @ B).max())
+
+
 # ---------------------------------------------------------------------------------------------
 # CasADi exports
 # ---------------------------------------------------------------------------------------------

@@ -44,7 +44,7 @@ C_V_PAPER = 1.19e3
 """Convection capacitance identified by Goyal et al. [J/K]."""
 
 
-def zoh(A, dt: float):
+def zoh(A, dt: float, B=None):
     r"""Exact zero-order-hold discretisation of :math:`\dot x = A x + b`.
 
     Uses Van Loan's block exponential
@@ -59,16 +59,28 @@ def zoh(A, dt: float):
         State matrix [1/s].
     dt : float
         Step [s].
+    B : array_like, shape (n, m), optional
+        Input matrix: then ``Γ B`` is returned instead of ``Γ``, from the block exponential
+        with ``B`` in place of ``I``, an (n + m)-square matrix instead of 2n (the cube of it
+        is what costs: a 49-zone building's state-space export, 659 states and 148 inputs,
+        takes a quarter of the time).
 
     Returns
     -------
     Phi, Gamma : ndarray, shape (n, n)
+        ``Gamma`` is ``Γ B``, shape (n, m), when ``B`` is given.
     """
     A = A.toarray() if sp.issparse(A) else np.asarray(A, dtype=float)
     n = A.shape[0]
-    M = np.zeros((2 * n, 2 * n))
+    if B is not None:
+        B = B.toarray() if sp.issparse(B) else np.asarray(B, dtype=float)
+        if B.shape[1] >= n:             # the 2n form is the smaller one
+            Phi, Gamma = zoh(A, dt)
+            return Phi, Gamma @ B
+    m = n if B is None else B.shape[1]
+    M = np.zeros((n + m, n + m))
     M[:n, :n] = A * dt
-    M[:n, n:] = np.eye(n) * dt
+    M[:n, n:] = (np.eye(n) if B is None else B) * dt
     with single_thread_blas():
         E = sla.expm(M)
     return E[:n, :n], E[:n, n:]

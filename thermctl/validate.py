@@ -18,7 +18,7 @@ import numpy as np
 from scipy.stats import gmean
 
 from .errors import ModelError
-from .model import ConvectionParameters, ThermalModel
+from .model import ConvectionParameters, ThermalModel, zoh
 
 __all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "EXACT_LIMIT", "KSTEP_MAX_STATES", "relative_error",
            "minimum_flows", "kstep_validation", "ValidationReport", "validate", "Verdict",
@@ -34,7 +34,8 @@ KSTEP_MAX_STATES = 150
 """Largest model whose k-step errors ``thermctl validate`` computes unless asked
 (``--kstep``): they need one whole-building Kalman filter fit per model, n³ per evaluation.
 identify draws the same line for its whole-building refit. Measured: the 7-zone demo
-(55 states) a few seconds; the 49-zone corridor (659 states) over 10 minutes per model."""
+(55 states) a few seconds; on the 49-zone corridor (659 states) the three models' fits had
+not finished after 17 minutes (stopped)."""
 
 
 @dataclass
@@ -146,10 +147,10 @@ def step_response_matrix(model: ThermalModel, ms, horizons_h=(1.0, 6.0, 24.0),
         Step size [W].
     method : {"auto", "exact", "radau"}
         ``exact``: the matrix exponential of ``[[A, B_Q], [0, 0]]`` (dense, one per
-        horizon). ``radau``: the model's L-stable Radau step (:mod:`thermctl._step`) from
-        rest, sparse LU, 2-min sub-steps over the first hour and 30-min ones after; on a
-        49-zone corridor building it agrees with ``exact`` to a relative 6e-7, 1e-5 and
-        1e-7 at 1, 6 and 24 h, in a tenth of its time. ``auto``: ``exact`` up to
+        horizon; :func:`~thermctl.model.zoh`). ``radau``: the model's L-stable Radau step
+        (:mod:`thermctl._step`) from rest, sparse LU, 2-min sub-steps over the first hour
+        and 30-min ones after; on a 49-zone corridor building it agrees with ``exact`` to a
+        relative 6e-7, 1e-5 and 1e-7 at 1, 6 and 24 h, in a tenth of its time. ``auto``: ``exact`` up to
         :data:`EXACT_LIMIT` states plus zones, ``radau`` above.
 
     Returns
@@ -174,18 +175,8 @@ def step_response_matrix(model: ThermalModel, ms, horizons_h=(1.0, 6.0, 24.0),
 
 
 def _responses_exact(A_u, BQ, times):
-    """``Γ(t) B_Q`` at each of ``times`` [s]: the top-right block of ``exp([[A, B], [0, 0]] t)``
-    (n + m square, where the ``zoh`` pair would be 2n)."""
-    import scipy.linalg as sla
-
-    from ._blas import single_thread_blas
-
-    n, m = BQ.shape
-    M = np.zeros((n + m, n + m))
-    M[:n, :n] = A_u.toarray()
-    M[:n, n:] = BQ
-    with single_thread_blas():
-        return [sla.expm(M * t)[:n, n:] for t in times]
+    """``Γ(t) B_Q`` at each of ``times`` [s] (:func:`~thermctl.model.zoh` with ``B``)."""
+    return [zoh(A_u, t, BQ)[1] for t in times]
 
 
 def _responses_radau(A_u, BQ, times, h_first: float = 120.0, h_after: float = 1800.0):

@@ -133,8 +133,12 @@ def export(
         console.print(escape(f"disturbance inputs (identified): {', '.join(dist.names)}"),
                       highlight=False)
     if kf is None:
-        console.print("no Kalman filter exported: the model has no identified noise model "
-                      "(identified with --criterion simulation)", highlight=False)
+        # a large building's local problems fit their noise each for itself, and no
+        # whole-building refit runs above split.refit_max_states
+        why = ("identified by local problems without a whole-building refit"
+               if model.meta.get("local") else "identified with --criterion simulation")
+        console.print(f"no Kalman filter exported: the model has no identified noise model "
+                      f"({why})", highlight=False)
     else:
         console.print(escape(f"Kalman filter: {len(kf.states)} states ({len(kf.states) - model.network.n_states} "
                              f"gain/sensor states), noise {', '.join(f'{k}={v:.3g}' for k, v in kf.params.items())}"

@@ -74,6 +74,11 @@ def typical_inputs(meas, network) -> dict:
     return out
 
 
+DESCRIBE_NODES = 12
+"""Above this many nodes an input's values are summarised on the terminal
+(:meth:`ExportPoint.describe`)."""
+
+
 @dataclass
 class ExportPoint:
     """An operating point together with where every value came from.
@@ -113,15 +118,26 @@ class ExportPoint:
                 "meaning": "the linear model is in deviations from this point: x - x_op, u - u_op; "
                            "the state is the steady state for these inputs (disturbances 0)"}
 
-    def describe(self) -> str:
-        """A few lines for the terminal: every value with its source, then the notes."""
+    def describe(self, max_nodes: int = DESCRIBE_NODES) -> str:
+        """A few lines for the terminal: every value with its source, then the notes.
+
+        An input with more than ``max_nodes`` nodes is summarised (range, median, how many
+        values came from each source, the first few): a 490-zone building's full listing
+        was four lines of 5 000 characters each. Every value is in :meth:`to_dict`.
+        """
         tag = {"given": "given", "data": "data", "default": "DEFAULT"}  # loud: nothing known
         lines = ["operating point (the linear model is in deviations from it):"]
         for name in ("ms", "Ts", "Q", "T"):
             vals, srcs = self.values[name], self.sources[name]
             # Q = 0 is the natural point (unmeasured gains are the disturbances): no alarm
-            parts = [f"{n}={v:.4g} ({'default' if name == 'Q' else tag[srcs[n]]})"
-                     for n, v in vals.items()]
+            src = {n: "default" if name == "Q" else tag[srcs[n]] for n in vals}
+            parts = [f"{n}={v:.4g} ({src[n]})" for n, v in vals.items()]
+            if len(parts) > max_nodes:
+                v = np.fromiter(vals.values(), float)
+                count = {t: sum(1 for x in src.values() if x == t) for t in dict.fromkeys(src.values())}
+                parts = ([f"{len(v)} nodes, {v.min():.4g} to {v.max():.4g} (median "
+                          f"{np.median(v):.4g}), " + ", ".join(f"{k} {t}" for t, k in count.items())]
+                         + parts[:3] + ["… (every value in the exported file)"])
             lines.append(f"  {name} [{_UNITS[name]}]: " + ", ".join(parts))
         lines += [f"  NOTE: {n}" for n in self.notes]
         return "\n".join(lines)

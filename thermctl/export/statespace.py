@@ -43,8 +43,7 @@ def statespace(model: ThermalModel, op: OperatingPoint, dt: float | None = None)
     if dt is not None:
         if not dt > 0:
             raise ModelError(f"dt must be > 0 [s], found {dt}")
-        Phi, Gamma = zoh(A, dt)
-        A, B = Phi, Gamma @ B
+        A, B = zoh(A, dt, B)
     sys = ct.ss(A, B, C, D, dt=0 if dt is None else dt, states=net.state_names,
                 inputs=net.input_names + dist.names, outputs=net.output_names,
                 name=net.spec.name)
