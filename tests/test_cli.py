@@ -123,6 +123,26 @@ def test_export_roundtrip(identified, tmp_path):
     assert np.all(np.abs(np.linalg.eigvals(sys.A)) < 1.0)  # a stable discrete system
 
 
+def test_simulate_steps_a_large_model_by_radau_and_agrees_with_exact(identified, tb_dir, tmp_path,
+                                                                     monkeypatch):
+    import thermctl.cli.pipeline as P
+
+    res = run("simulate", identified / "model.json", tb_dir / "data.csv", "--hours", 12,
+              "--out", tmp_path / "exact.csv")
+    assert res.exit_code == 0, res.output
+    assert "(exact steps)" in res.output
+    monkeypatch.setattr(P, "SIMULATE_EXACT_STATES", 10)      # this model has more states
+    res = run("simulate", identified / "model.json", tb_dir / "data.csv", "--hours", 12,
+              "--out", tmp_path / "radau.csv")
+    assert res.exit_code == 0, res.output
+    assert "(radau steps)" in res.output
+    a = pd.read_csv(tmp_path / "exact.csv", index_col=0)
+    b = pd.read_csv(tmp_path / "radau.csv", index_col=0)
+    assert a.shape == b.shape and len(a) == 12 * 12 and list(a.index) == list(b.index)
+    # 1-min Radau sub-steps against the exponential; the files are rounded to 1e-4 K
+    np.testing.assert_allclose(b.to_numpy(), a.to_numpy(), rtol=0, atol=2e-4)
+
+
 def test_export_says_why_a_local_model_has_no_kalman_filter(identified, tmp_path):
     # a large building's model: R̄_v from local problems, no whole-building noise model
     doc = json.loads((identified / "model.json").read_text())

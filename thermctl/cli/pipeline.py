@@ -568,6 +568,10 @@ def report(
     return path
 
 
+SIMULATE_EXACT_STATES = 150
+"""Largest model ``thermctl simulate`` steps by matrix exponentials; Radau steps above."""
+
+
 @app.command()
 @handle_errors
 def simulate(
@@ -579,6 +583,11 @@ def simulate(
     hours: float = typer.Option(None, help="Length in hours (default: to the end of the data)."),
 ):
     """Simulate a model open loop with measured inputs from the first sample.
+
+    Exact (one matrix exponential per supply-flow vector) up to 150 states; above, Radau
+    steps of 1 minute with sparse LU, as validate's open loop: on a 49-zone model (659
+    states) within 1e-4 K of exact, 48 h in 5 s instead of about 50 s (one dense
+    exponential of 1 318 rows per 5-min step; at 490 zones, 11 484 rows).
 
     Example:  thermctl simulate out/model.json data.csv --hours 48 --out sim.csv
     """
@@ -593,12 +602,13 @@ def simulate(
     if np.isnan(Tb0).any() or np.all(np.isnan(T0)):
         raise DataError(f"{data}: the first sample of the window has gaps; choose --start")
     x0 = model.initial_state(T0, Tb0)
-    X = model.simulate(win.inputs(net)[:-1], win.step.total_seconds(), x0)
+    method = "exact" if net.n_states <= SIMULATE_EXACT_STATES else "radau"
+    X = model.simulate(win.inputs(net)[:-1], win.step.total_seconds(), x0, method=method)
     df = pd.DataFrame(X[:, :net.n_zones], index=win.frame.index, columns=[f"T:{z}" for z in net.zones])
     df.index = [t.isoformat() for t in df.index]
     df.index.name = "time"
     atomic_write_text(out, df.round(4).to_csv())
-    console.print(f"wrote {out}: {len(df)} samples of {net.n_zones} zones")
+    console.print(f"wrote {out}: {len(df)} samples of {net.n_zones} zones ({method} steps)")
 
 
 @app.command()
