@@ -20,9 +20,9 @@ from scipy.stats import gmean
 from .errors import ModelError
 from .model import ConvectionParameters, ThermalModel, zoh
 
-__all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "EXACT_LIMIT", "KSTEP_MAX_STATES", "relative_error",
-           "minimum_flows", "kstep_validation", "ValidationReport", "validate", "Verdict",
-           "verdict", "relative_words", "support_note"]
+__all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "EXACT_LIMIT",
+           "KSTEP_MAX_STATES", "relative_error", "minimum_flows", "kstep_validation",
+           "ValidationReport", "validate", "Verdict", "verdict", "relative_words", "support_note"]
 
 VERDICT_MARGIN = 0.05
 """Relative RMSE difference below which a measure favours neither model [-]."""
@@ -33,9 +33,8 @@ MPC_HORIZONS_H = (1.0, 6.0)
 KSTEP_MAX_STATES = 150
 """Largest model whose k-step errors ``thermctl validate`` computes unless asked
 (``--kstep``): they need one whole-building Kalman filter fit per model, n³ per evaluation.
-identify draws the same line for its whole-building refit. Measured: the 7-zone demo
-(55 states) a few seconds; on the 49-zone corridor (659 states) the three models' fits had
-not finished after 17 minutes (stopped)."""
+identify draws the same line for its whole-building refit. Measured on the 49-zone corridor
+(659 states): the three models' fits had not finished after 17 minutes (stopped)."""
 
 
 @dataclass
@@ -150,8 +149,8 @@ def step_response_matrix(model: ThermalModel, ms, horizons_h=(1.0, 6.0, 24.0),
         horizon; :func:`~thermctl.model.zoh`). ``radau``: the model's L-stable Radau step
         (:mod:`thermctl._step`) from rest, sparse LU, 2-min sub-steps over the first hour
         and 30-min ones after; on a 49-zone corridor building it agrees with ``exact`` to a
-        relative 6e-7, 1e-5 and 1e-7 at 1, 6 and 24 h, in a tenth of its time. ``auto``: ``exact`` up to
-        :data:`EXACT_LIMIT` states plus zones, ``radau`` above.
+        relative 6e-7, 1e-5 and 1e-7 at 1, 6 and 24 h, in a tenth of its time. ``auto``:
+        ``exact`` up to :data:`EXACT_LIMIT` states plus zones, ``radau`` above.
 
     Returns
     -------

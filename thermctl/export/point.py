@@ -3,6 +3,7 @@ then stated defaults, each with its source (:func:`export_point`, :class:`Export
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -134,9 +135,10 @@ class ExportPoint:
             parts = [f"{n}={v:.4g} ({src[n]})" for n, v in vals.items()]
             if len(parts) > max_nodes:
                 v = np.fromiter(vals.values(), float)
-                count = {t: sum(1 for x in src.values() if x == t) for t in dict.fromkeys(src.values())}
+                count = Counter(src.values())           # in first-seen order
                 parts = ([f"{len(v)} nodes, {v.min():.4g} to {v.max():.4g} (median "
-                          f"{np.median(v):.4g}), " + ", ".join(f"{k} {t}" for t, k in count.items())]
+                          f"{np.median(v):.4g}), "
+                          + ", ".join(f"{k} {t}" for t, k in count.items())]
                          + parts[:3] + ["… (every value in the exported file)"])
             lines.append(f"  {name} [{_UNITS[name]}]: " + ", ".join(parts))
         lines += [f"  NOTE: {n}" for n in self.notes]
