@@ -28,7 +28,7 @@ def _vr(zones=("z1",)):
     return SimpleNamespace(open_loop={"identified": ol, "conduction-only": ol}, step_errors={},
                            step_responses={}, horizons_h=(1.0, 6.0, 24.0), kstep={}, units="K",
                            window=("2011-02-01", "2011-02-03"), zones=list(zones),
-                           to_data_units=lambda v: v, verdict=verdict(0.0, {}))
+                           to_data_units=lambda v: v, verdict=verdict(0.0, {}), notes=[])
 
 
 def _copy(model):

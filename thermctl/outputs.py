@@ -508,7 +508,7 @@ def validation_document(vr, model: ThermalModel | None = None) -> dict:
         blocks.append({"section": "Validation", "kind": "table",
                        "title": "Step-response error vs the truth (relative Frobenius norm)",
                        "content": sr_rows})
-    for n in getattr(vr, "notes", ()):
+    for n in vr.notes:
         blocks.append({"section": "Validation", "kind": "note", "title": "Not computed",
                        "content": n})
     blocks.append({"section": "Validation", "kind": "note", "title": "What the data can support",
@@ -527,7 +527,7 @@ def validation_document(vr, model: ThermalModel | None = None) -> dict:
                                "rmse": np.vectorize(conv)(r.rmse).tolist(),
                                "rmse_mean": [conv(v) for v in r.rmse_mean],
                                "n": r.n.tolist()} for k, r in vr.kstep.items()},
-            "notes": list(getattr(vr, "notes", ())),
+            "notes": list(vr.notes),
             "report": blocks}
 
 
