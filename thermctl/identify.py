@@ -959,6 +959,8 @@ def _lost_data_note(reasons, kept: set, notes: list) -> None:
 
 def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identification:
     """The model of combined local results: whole-building refit when small enough."""
+    from .local import combine_zone_params
+
     spec = meas.spec
     notes = []
     est = opt.estimation
@@ -1001,7 +1003,8 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
         ua = li.ua_factor
         notes.append(f"the whole-building model has {net.n_states} states (> "
                      f"{opt.split.refit_max_states}): R̄_v per air path from the local problems, "
-                     "no whole-building refit and no intervals"
+                     "each zone's apertures and noise from its own problem, no whole-building "
+                     "refit and no intervals"
                      + ("; UA factor per wall class, median of the local fits: "
                         + ", ".join(f"{c} {f:.3g}" for c, f in ua.items()) if ua else ""))
     meta = _meta(meas, cal, val, opt, {})
@@ -1022,6 +1025,16 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
         meta["greybox"] = _greybox_meta(gb, ida)
         model = ThermalModel(_fitted_network(gb), rbar_v=gb.rbar_v_, c_v=gb.c_v_, meta=meta)
     else:
+        # no whole-building fit: each zone's apertures, gain profile and noise from its
+        # own local problem, so that the export has the disturbance inputs and a filter
+        params, at_bounds, pnotes = combine_zone_params(spec, li.problems, li.results)
+        notes += pnotes
+        if params:
+            meta["greybox"] = {
+                "criterion": "likelihood, one local problem per measured zone",
+                "source": "local", "params": params, "active_bounds": at_bounds,
+                "n_obs": int(sum(r.n_obs for r in li.results if r.error is None)),
+                "rows": opt.split.rows}
         model = li.model(spec, meta=meta)
     return Identification(model, None, None, None, cal, val, opt, notes, selection=None,
                           greybox=gb, intervals=ida, local=li)

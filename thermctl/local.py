@@ -60,7 +60,7 @@ from .spec import WALL_CLASSES, BuildingSpec, Distance, Zone, wall_class
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
            "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble",
            "identify_local", "joint_local", "COMBINE_RULES",
-           "combine_ua_factors"]
+           "combine_ua_factors", "combine_zone_params", "zone_params"]
 
 log = logging.getLogger(__name__)
 
@@ -405,6 +405,14 @@ class LocalResult:
     confirmed : dict
         Edge name → ``(ok, delta, t, note, rbar_v)`` of an air path another problem kept
         and this one's search did not, tested here directly (:func:`confirm_local`).
+    params : dict
+        The local fit's other parameters under the whole building's names
+        (:func:`zone_params`): the zone's solar apertures, gain profile and noise, its
+        latent zones' heat noise and apertures, building-level noise parameters. Units as
+        :data:`thermctl.estimate.likelihood.params.GROUP_UNITS`.
+    at_bounds : list of str
+        Which of ``params`` ended on a search bound (``"sigma_v[r1] at its lower bound
+        0.0001 [K]"``).
     """
 
     zone: str
@@ -421,6 +429,63 @@ class LocalResult:
     error: str | None = None
     ua_factor: dict = field(default_factory=dict)
     confirmed: dict = field(default_factory=dict)
+    params: dict = field(default_factory=dict)
+    at_bounds: list = field(default_factory=list)
+
+
+# groups a local fit shares over its zones (``noise="shared"``) that belong to one zone of
+# the whole building: the sensor noise and the gain's random walk are the measured zone's
+# (it is the problem's only output), the heat noise every local zone's
+_OWN_SHARED = ("sigma_v", "sigma_phi")
+# what LocalResult carries in its own fields (R̄_v, τ0, UA factors), not in ``params``
+_OWN_FIELDS = ("rbar_v", "tau0", "ua_factor")
+
+
+def zone_params(problem: "LocalProblem", params: dict) -> dict:
+    """A local fit's parameters under the whole building's names.
+
+    A parameter already named by zone (``aperture[r1,solar:south]``, ``sigma_q[r1]``)
+    keeps its name; one the local fit shares over its zones gets the zone's name
+    (``sigma_v`` → ``sigma_v[r1]``; ``sigma_q`` → one ``sigma_q[z]`` per local zone);
+    building-level ones (``tau_g``, ``occ_ratio``…) keep theirs. R̄_v, τ0 and the UA
+    factors are left out (:class:`LocalResult` has fields for them).
+
+    Parameters
+    ----------
+    problem : LocalProblem
+    params : dict
+        ``LikelihoodEstimator.params_`` of the problem's fit.
+
+    Returns
+    -------
+    dict
+    """
+    out = {}
+    local = [problem.zone] + problem.latent
+    for k, v in params.items():
+        group = k.split("[")[0]
+        if group in _OWN_FIELDS:
+            continue
+        if "[" in k:
+            out[k] = float(v)
+        elif group in _OWN_SHARED:
+            out[f"{group}[{problem.zone}]"] = float(v)
+        elif group == "sigma_q":
+            out.update({f"sigma_q[{z}]": float(v) for z in local})
+        else:
+            out[k] = float(v)
+    return out
+
+
+def _renamed_bounds(problem, est) -> list:
+    """``est``'s active bounds under :func:`zone_params`' names (parameters left out there
+    are left out here)."""
+    out = []
+    for s in est.result_.active_bounds:
+        name, sep, rest = str(s).partition(" at its ")
+        for new in zone_params(problem, {name: 0.0}):
+            out.append(new + sep + rest)
+    return out
 
 
 def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: float = 10.0,
@@ -467,17 +532,26 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     t0, c0 = time.perf_counter(), time.process_time()
     sub = problem.data(frame)
     n_states = problem.n_states
-    if not problem.candidates:
-        return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states,
-                           time=time.perf_counter() - t0, cpu=time.process_time() - c0)
     cands, direction = list(problem.candidates), "both"
     if problem.proposed is not None:
         cands, direction = list(problem.proposed), "backward"
-        if not cands:
-            return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states,
-                               time=time.perf_counter() - t0, cpu=time.process_time() - c0,
-                               reasons={air_path_name(a, b): "out: not proposed"
-                                        for a, b, _ in problem.candidates})
+    if not cands:
+        # nothing to select; the zone's apertures, gains and noise still come from here
+        # (the whole-building model of a large building takes them from this fit)
+        est = _local_estimator(problem.network(), max_iter, solar=solar, fit_rows=fit_rows,
+                               **options)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            est.fit(sub)
+        return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states, int(est.n_obs_), 1,
+                           time.perf_counter() - t0, time.process_time() - c0,
+                           reasons={air_path_name(a, b): "out: not proposed"
+                                    for a, b, _ in problem.candidates},
+                           ua_factor=est.problem_.ua_factors(est.eta_) if _wall_factors(options)
+                           else {},
+                           params=zone_params(problem, est.params_),
+                           at_bounds=_renamed_bounds(problem, est))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -499,7 +573,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     for k in kept:          # a kept edge always has a removal cost (keep step) or an add delta
         evidence.setdefault(k, -float(margin))
     est, rb, n_fits, ua = sel.estimator, dict(sel.per_edge), sel.n_fits, {}
-    if options.get("wall_factors") or getattr(options.get("options"), "wall_factors", False):
+    if _wall_factors(options):
         est, refit = _whole_class_fit(problem, sub, sel, max_iter, solar=solar,
                                       fit_rows=fit_rows, **options)
         n_fits += refit
@@ -509,7 +583,25 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     tau0 = float(est.tau0_) if kept else float("nan")
     return LocalResult(problem.zone, kept, evidence, rb, tau0, n_states, int(est.n_obs_),
                        n_fits, time.perf_counter() - t0, time.process_time() - c0,
-                       dict(sel.reasons), ua_factor=ua)
+                       dict(sel.reasons), ua_factor=ua, params=zone_params(problem, est.params_),
+                       at_bounds=_renamed_bounds(problem, est))
+
+
+def _wall_factors(options) -> bool:
+    return bool(options.get("wall_factors")
+                or getattr(options.get("options"), "wall_factors", False))
+
+
+def _local_estimator(net, max_iter, **options):
+    """A per-edge :class:`~thermctl.estimate.likelihood.LikelihoodEstimator` of a local
+    network with the estimator's keywords of ``options`` (the selection's own, such as
+    ``min_t``, left out)."""
+    from .estimate.likelihood import LikelihoodEstimator
+    from .selection import select_air_paths
+
+    skip = set(inspect.signature(select_air_paths).parameters)
+    kw = {k: v for k, v in options.items() if k not in skip}
+    return LikelihoodEstimator(net, per_edge=True, tol=1e-9, max_iter=max_iter, **kw)
 
 
 def _whole_class_fit(problem, sub, sel, max_iter, **options):
@@ -524,9 +616,6 @@ def _whole_class_fit(problem, sub, sel, max_iter, **options):
     classes whose walls changed (those start at the spec, 1). No fit when the selection's
     last fit already had these classes.
     """
-    from .estimate.likelihood import LikelihoodEstimator
-    from .selection import select_air_paths
-
     net = problem.network([tuple(e) for e in sel.edges])
     have = list(sel.estimator.problem_.wall_classes)
     want = list(dict(problem.wall_classes).get(e.name, c)
@@ -537,10 +626,7 @@ def _whole_class_fit(problem, sub, sel, max_iter, **options):
             if [h == c for h in have] == [w == c for w in want]}
     init = {k: v for k, v in sel.estimator.params_.items()
             if not k.startswith("ua_factor[") or k[len("ua_factor["):-1] in same}
-    # the selection's own keywords (min_t...) are not the estimator's
-    skip = set(inspect.signature(select_air_paths).parameters)
-    kw = {k: v for k, v in options.items() if k not in skip}
-    est = LikelihoodEstimator(net, per_edge=True, tol=1e-9, max_iter=max_iter, **kw)
+    est = _local_estimator(net, max_iter, **options)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BoundWarning)
         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -1243,6 +1329,80 @@ def assemble(problems, results, rule: str = "both", margin: float = 10.0,
     return LocalIdentification(problems, results, verdicts, edges, rb, tau0, rule, wall,
                                float(sum(r.cpu for r in results)),
                                combine_ua_factors(results))
+
+
+def _zone_of(name: str):
+    """The zone a parameter name refers to (``aperture[r1,solar:s]`` → ``r1``), or None."""
+    if "[" not in name:
+        return None
+    return name[name.index("[") + 1:].rstrip("]").split(",")[0]
+
+
+# the noise groups a whole-building filter needs for every zone (sigma_q) or every
+# measured zone (sigma_v, sigma_phi) (thermctl.export.kalman.augment_noise)
+_NOISE_EVERY = (("sigma_q", False), ("sigma_v", True), ("sigma_phi", True))
+
+
+def combine_zone_params(spec: BuildingSpec, problems, results) -> tuple[dict, list, list]:
+    """The whole building's apertures, gain profiles and noise from its local fits.
+
+    A measured zone's parameters are those of its own problem, the one whose output it is
+    (its neighbours' problems see it as an exact input and fit nothing of it). An unmeasured
+    zone sits in every problem that reaches it: the median of their values. A
+    building-level parameter (``tau_g``…): the median over the problems. A zone without a
+    value of a noise group the whole-building filter needs (its problem failed, or an
+    unmeasured zone no problem holds) gets the median of the others, and a note says so;
+    such a zone has no apertures and no gain profile.
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+        The whole building.
+    problems : list of LocalProblem
+    results : list of LocalResult
+
+    Returns
+    -------
+    params : dict
+        Names and units as :class:`~thermctl.estimate.likelihood.LikelihoodEstimator`'s
+        ``params_`` with one noise level per zone.
+    at_bounds : list of str
+        The measured zones' own parameters that ended on a bound.
+    notes : list of str
+    """
+    own, shared, latent, bounds = {}, {}, {}, []
+    for r in results:
+        if r.error is not None or not r.params:
+            continue
+        for k, v in r.params.items():
+            z = _zone_of(k)
+            if z is None:
+                shared.setdefault(k, []).append(v)
+            elif z == r.zone:
+                own[k] = v
+            else:
+                latent.setdefault(k, []).append(v)
+        bounds += [b for b in r.at_bounds if _zone_of(b.partition(" at its ")[0]) == r.zone]
+    out = dict(own)
+    for k, vs in latent.items():
+        out.setdefault(k, float(np.median(vs)))
+    for k, vs in shared.items():
+        out[k] = float(np.median(vs))
+    notes = []
+    measured = set(spec.measured_zones)
+    for group, only_measured in _NOISE_EVERY:
+        have = [v for k, v in out.items() if k.startswith(group + "[")]
+        if not have:
+            continue
+        zones = [z for z in spec.zone_names if z in measured or not only_measured]
+        miss = [z for z in zones if f"{group}[{z}]" not in out]
+        if miss:
+            fill = float(np.median(have))
+            out.update({f"{group}[{z}]": fill for z in miss})
+            notes.append(f"{group} of {len(miss)} zone(s) without a local fit of their own "
+                         f"({', '.join(miss[:5])}{', …' if len(miss) > 5 else ''}): the median "
+                         f"of the others, {fill:.3g}")
+    return out, bounds, notes
 
 
 def combine_ua_factors(results) -> dict:

@@ -342,7 +342,9 @@ def identification_document(ident: Identification) -> dict:
         "run_id": model.meta.get("run_id"), "created": model.meta.get("created"),
         "method": ("paper (SIN rule + simulation criterion)" if opt.paper else
                    f"grey-box ({opt.estimation.criterion}; structure: "
-                   + ("model-based selection" if sel is not None else "SIN rule") + ")"),
+                   + ("model-based selection" if sel is not None else
+                      "model-based selection in one local problem per measured zone"
+                      if ident.local is not None else "SIN rule") + ")"),
         "model": model_to_dict(model)["parameters"],
         "alpha": model.network.spec.alpha(),
         "alpha_per_wall": model.network.spec.alphas(),

@@ -105,6 +105,11 @@ def export(
     dt: float = typer.Option(None, "--dt", help="Discretise the StateSpace by ZOH with this step (s); "
                              "also the stationary Kalman gain at this step."),
     substeps: int = typer.Option(5, "--substeps", help="Sub-steps of the CasADi discrete step."),
+    kalman_max_states: int = typer.Option(
+        None, "--kalman-max-states", min=1, show_default=False,
+        help="Above this many filter states --dt leaves out the stationary Kalman gain "
+             "(dense, ~n³: 5 s at 707 states, about 2 min at 2 000); default 2000. The "
+             "continuous noise model is exported either way."),
 ):
     """Export an identified model for control design.
 
@@ -126,23 +131,28 @@ def export(
     point = ex.export_point(model, given, data=meas)
     console.print(escape(point.describe()), highlight=False, soft_wrap=True)
     dist = ex.disturbances(model)
-    kf = ex.kalman_filter(model, point.op, dt=dt)
+    kf = ex.kalman_filter(model, point.op, dt=dt,
+                          **({} if kalman_max_states is None else {"max_states": kalman_max_states}))
     info = {"operating_point": point.to_dict(), "disturbances": dist.to_dict(),
             "model": str(model_path)}
     if dist.names:
         console.print(escape(f"disturbance inputs (identified): {', '.join(dist.names)}"),
                       highlight=False)
     if kf is None:
-        # a large building's local problems fit their noise each for itself, and no
-        # whole-building refit runs above split.refit_max_states
-        why = ("identified by local problems without a whole-building refit"
+        # a local-path model written before its zones' noise was carried over has none
+        why = ("identified by local problems, written without their noise parameters"
                if model.meta.get("local") else "identified with --criterion simulation")
         console.print(f"no Kalman filter exported: the model has no identified noise model "
                       f"({why})", highlight=False)
     else:
+        src = (" from the local problems, each zone's own"
+               if (model.meta.get("greybox") or {}).get("source") == "local" else "")
         console.print(escape(f"Kalman filter: {len(kf.states)} states ({len(kf.states) - model.network.n_states} "
-                             f"gain/sensor states), noise {', '.join(f'{k}={v:.3g}' for k, v in kf.params.items())}"
+                             f"gain/sensor states), noise{src}: {kf.describe_noise()}"
                              + ("" if dt else "; give --dt for the stationary gain")), highlight=False)
+        if kf.note:
+            console.print(escape(f"NOTE: {kf.note}; --kalman-max-states raises the limit"),
+                          highlight=False)
     if statespace is not None:
         sys, _ = ex.statespace(model, point.op, dt=dt)
         save_statespace(sys, statespace, op=point.op, info=info,
