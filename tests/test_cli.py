@@ -90,6 +90,15 @@ def test_validate_and_report(identified, tb_dir):
     assert np.all(np.diff(ks["identified"]["rmse_mean"]) > 0)
     assert ks["identified"]["rmse_mean"][0] < ks["conduction-only"]["rmse_mean"][0]
     assert doc["step_response_error"]["identified"][1] < 0.5 * doc["step_response_error"]["conduction-only"][1]
+    # the matrices are in their own file, from which the stored errors follow again
+    from thermctl.validate import relative_error
+    sr = doc["step_responses"]
+    f = np.load(identified / sr["file"])
+    assert set(sr["models"]) == {"identified", "conduction-only", "truth"} <= set(f.files)
+    assert list(f["zones"]) == doc["zones"] and f["identified"].shape == (3, 7, 7)
+    for k in ("identified", "conduction-only"):
+        assert np.allclose(relative_error(f[k], f["truth"]), doc["step_response_error"][k],
+                           rtol=1e-12)
     res = run("report", identified)
     assert res.exit_code == 0, res.output
     html = (identified / "report.html").read_text()
@@ -101,6 +110,10 @@ def test_validate_leaves_kstep_out_above_the_state_limit_and_says_so(identified,
     import thermctl.validate as V
 
     monkeypatch.setattr(V, "KSTEP_MAX_STATES", 10)      # this model has more states
+    # and its 7 zones stand in for a large building's table: the worst 2 and the mean
+    import thermctl.cli.pipeline as P
+    monkeypatch.setattr(P, "PRINT_ZONES", 5)
+    monkeypatch.setattr(P, "PRINT_WORST", 2)
     res = run("validate", identified / "model.json", tb_dir / "data.csv", "--hours", 24,
               "--out", tmp_path)
     assert res.exit_code == 0, res.output
@@ -111,6 +124,11 @@ def test_validate_leaves_kstep_out_above_the_state_limit_and_says_so(identified,
     assert any(b["title"] == "Not computed" for b in doc["report"])
     # without k-step errors the testbed truth still decides, as with --no-kstep
     assert doc["verdict"]["basis"] == "truth"
+    out = " ".join(res.output.split())
+    worst = sorted(doc["open_loop"], key=lambda r: -r["RMSE identified"])
+    assert "the 2 of 6 zones the identified model predicts worst" in out, out
+    assert worst[0]["zone"] in out and worst[1]["zone"] in out and worst[2]["zone"] not in out
+    assert "mean, 6" in out
 
 
 def test_export_roundtrip(identified, tmp_path):

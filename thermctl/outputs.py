@@ -29,14 +29,18 @@ if TYPE_CHECKING:  # only for annotations: keeps `import thermctl.outputs` light
     from .identify import Identification
 
 __all__ = ["staged_output", "write_outputs", "identification_document", "validation_document",
-           "check_outdir", "check_consistent", "new_run_id"]
+           "write_step_responses", "check_outdir", "check_consistent", "new_run_id",
+           "STEP_RESPONSES_FILE"]
 
 
 # What thermctl writes into an output directory. The run outputs belong to one
+STEP_RESPONSES_FILE = "validation-step-responses.npz"
+"""The step-response matrices of ``validate`` (:func:`write_step_responses`): 490 zones
+made 72 MB of JSON numbers, which nothing reads back as text."""
 # identification: identify replaces all of them, so none of an earlier run's survive to be
 # mixed with the new one (issue 22). Files not in this list are never deleted.
-RUN_FILES = ("identification.json", "model.json", "validation.json", "reduction.json",
-             "figures.json", "report.html")
+RUN_FILES = ("identification.json", "model.json", "validation.json", STEP_RESPONSES_FILE,
+             "reduction.json", "figures.json", "report.html")
 FIGURES = "figures"
 # written by thermctl but belonging to no identification (the demo's testbed data, which
 # identify then reads): neither replaced nor counted as foreign
@@ -471,6 +475,22 @@ def _edge_time_constants(model: ThermalModel) -> dict:
     return out
 
 
+def write_step_responses(vr, path) -> None:
+    """``validate``'s step-response matrices as ``.npz``: one array per model (``identified``,
+    ``conduction-only``, ``truth``), ``G[h, j, i]`` the rise of zone ``j`` [K] at horizon
+    ``h`` after 100 W into zone ``i`` (:func:`thermctl.validate.step_response_matrix`),
+    with ``zones`` and ``horizons_h`` [h]. ``validation.json`` names the file.
+
+    Examples
+    --------
+    >>> import numpy as np                                             # doctest: +SKIP
+    >>> f = np.load("out/validation-step-responses.npz")               # doctest: +SKIP
+    >>> f["identified"][0][:, 2]    # 1 h after heating the third zone # doctest: +SKIP
+    """
+    np.savez_compressed(path, zones=np.array(vr.zones), horizons_h=np.asarray(vr.horizons_h, float),
+                        **{k: np.asarray(v, float) for k, v in vr.step_responses.items()})
+
+
 def validation_document(vr, model: ThermalModel | None = None) -> dict:
     """The content of ``validation.json`` (with the report blocks).
 
@@ -515,7 +535,7 @@ def validation_document(vr, model: ThermalModel | None = None) -> dict:
                        "content": n})
     blocks.append({"section": "Validation", "kind": "note", "title": "What the data can support",
                    "content": support_note(vr)})
-    return {"format": "thermctl-validation", "version": 1,
+    return {"format": "thermctl-validation", "version": 2,
             "identification_run_id": None if model is None else model.meta.get("run_id"),
             # the verdict weighs every horizon; its per-horizon numbers travel with it
             "verdict": vr.verdict.to_dict(),
@@ -523,7 +543,9 @@ def validation_document(vr, model: ThermalModel | None = None) -> dict:
             "units": vr.units, "open_loop": rows,
             "rmse_mean": {k: conv(r.rmse_mean) for k, r in vr.open_loop.items()},
             "step_response_error": {k: v.tolist() for k, v in vr.step_errors.items()},
-            "step_responses_K_per_100W": {k: v.tolist() for k, v in vr.step_responses.items()},
+            "step_responses": {"file": STEP_RESPONSES_FILE, "unit": "K per 100 W",
+                               "models": list(vr.step_responses),
+                               "shape": "(horizon, zone responding, zone heated)"},
             "horizons_h": list(vr.horizons_h), "zones": vr.zones,
             "kstep_rmse": {k: {"horizons_s": r.horizons.tolist(), "zones": r.zones,
                                "rmse": np.vectorize(conv)(r.rmse).tolist(),

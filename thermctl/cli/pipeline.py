@@ -466,7 +466,8 @@ def validate(
       thermctl validate out/model.json data.csv --hours 24 --no-kstep
     """
     from ..validate import validate as run_validate
-    from ..outputs import staged_output, validation_document
+    from ..outputs import (STEP_RESPONSES_FILE, staged_output, validation_document,
+                           write_step_responses)
     from .. import report as rep
 
     model = load_model(model_path)
@@ -502,6 +503,7 @@ def validate(
     doc = validation_document(vr, model)
     with staged_output(outdir) as tmp:
         (tmp / "validation.json").write_text(json.dumps(doc, indent=2))
+        write_step_responses(vr, tmp / STEP_RESPONSES_FILE)
         from ..plots.validate import plot_open_loop, plot_step_responses
         for z in vr.zones[:4]:
             if z in vr.open_loop["identified"].zones:
@@ -528,12 +530,28 @@ def _saved_window(model, key):
     return None if w is None else (w[0], None)
 
 
+PRINT_ZONES, PRINT_WORST = 20, 10
+"""Above ``PRINT_ZONES`` zones ``validate`` prints the open-loop errors of the
+``PRINT_WORST`` it predicts worst, and the mean; every zone is in validation.json (490
+zones made a table of 490 rows)."""
+
+
 def _print_validation(vr):
+    zones = list(vr.open_loop["identified"].zones)
+    ident = vr.open_loop["identified"]
+    shown, title = zones, f"Open loop {vr.window[0]} → {vr.window[1]} ({vr.units})"
+    if len(zones) > PRINT_ZONES:
+        shown = sorted(zones, key=lambda z: -float(ident.rmse[z]))[:PRINT_WORST]
+        title += f": the {len(shown)} of {len(zones)} zones the identified model predicts worst"
     t = Table("zone", *[f"RMSE {k}" for k in vr.open_loop], *[f"max {k}" for k in vr.open_loop],
-              title=f"Open loop {vr.window[0]} → {vr.window[1]} ({vr.units})")
-    for z in vr.open_loop["identified"].zones:
+              title=title)
+    for z in shown:
         t.add_row(z, *[f"{float(vr.to_data_units(r.rmse[z])):.2f}" for r in vr.open_loop.values()],
                   *[f"{float(vr.to_data_units(r.max_abs[z])):.2f}" for r in vr.open_loop.values()])
+    if len(shown) < len(zones):
+        t.add_row(f"mean, {len(zones)}",
+                  *[f"{float(vr.to_data_units(r.rmse_mean)):.2f}" for r in vr.open_loop.values()],
+                  *["" for _ in vr.open_loop])
     console.print(t)
     if vr.kstep:
         first = next(iter(vr.kstep.values()))
