@@ -143,13 +143,13 @@ def test_export_roundtrip(identified, tmp_path):
 
 def test_simulate_steps_a_large_model_by_radau_and_agrees_with_exact(identified, tb_dir, tmp_path,
                                                                      monkeypatch):
-    import thermctl.cli.pipeline as P
+    import thermctl.model as M
 
     res = run("simulate", identified / "model.json", tb_dir / "data.csv", "--hours", 12,
               "--out", tmp_path / "exact.csv")
     assert res.exit_code == 0, res.output
     assert "(exact steps)" in res.output
-    monkeypatch.setattr(P, "SIMULATE_EXACT_STATES", 10)      # this model has more states
+    monkeypatch.setattr(M, "SIMULATE_EXACT_STATES", 10)      # this model has more states
     res = run("simulate", identified / "model.json", tb_dir / "data.csv", "--hours", 12,
               "--out", tmp_path / "radau.csv")
     assert res.exit_code == 0, res.output

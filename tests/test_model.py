@@ -303,6 +303,17 @@ def test_time_varying_flow_vs_stepwise_expm(small_model, reference_linear_system
     np.testing.assert_allclose(small_model.simulate(U, 600.0, X_ref[0], method="radau",
                                                     substeps=100), X_ref, rtol=0,
                                atol=1e-6 * scale)
+    # the default ("auto") is the exponential for a small model, Radau above the limit
+    import thermctl.model as M
+    exact = small_model.simulate(U, 600.0, X_ref[0], method="exact")
+    assert np.array_equal(small_model.simulate(U, 600.0, X_ref[0]), exact)
+    M.SIMULATE_EXACT_STATES, keep = small_model.network.n_states - 1, M.SIMULATE_EXACT_STATES
+    try:
+        auto = small_model.simulate(U, 600.0, X_ref[0])
+    finally:
+        M.SIMULATE_EXACT_STATES = keep
+    assert np.array_equal(auto, small_model.simulate(U, 600.0, X_ref[0], method="radau"))
+    assert not np.array_equal(auto, exact)
 
 
 def test_make_stepper_and_zoh(small_model):
@@ -538,7 +549,7 @@ MODEL_ERRORS = [
     ("dt-zero", lambda m: m.simulate(*_zeros(m)[:1], 0.0, _zeros(m)[1]),
      r"dt must be > 0 \[s\], found 0\.0"),
     ("bad-method", lambda m: m.simulate(_zeros(m)[0], 60.0, _zeros(m)[1], method="euler"),
-     r"method must be 'exact', 'radau' or 'cvodes', found 'euler'"),
+     r"method must be 'auto', 'exact', 'radau' or 'cvodes', found 'euler'"),
     ("stepper-bad-method", lambda m: make_stepper(np.eye(2), 60.0, method="cvodes"),
      r"method must be 'exact' or 'radau', found 'cvodes'"),
     ("rbar_v-zero", lambda m: ThermalModel(m.network, rbar_v=0.0).p,

@@ -586,10 +586,6 @@ def report(
     return path
 
 
-SIMULATE_EXACT_STATES = 150
-"""Largest model ``thermctl simulate`` steps by matrix exponentials; Radau steps above."""
-
-
 @app.command()
 @handle_errors
 def simulate(
@@ -610,6 +606,7 @@ def simulate(
     Example:  thermctl simulate out/model.json data.csv --hours 48 --out sim.csv
     """
     from ..io import atomic_write_text
+    from ..model import simulation_method
     model = load_model(model_path)
     net = model.network
     meas = _as_fitted(_read_data(data, net.spec, units), model)
@@ -620,7 +617,7 @@ def simulate(
     if np.isnan(Tb0).any() or np.all(np.isnan(T0)):
         raise DataError(f"{data}: the first sample of the window has gaps; choose --start")
     x0 = model.initial_state(T0, Tb0)
-    method = "exact" if net.n_states <= SIMULATE_EXACT_STATES else "radau"
+    method = simulation_method(net.n_states)        # exact below 150 states, Radau above
     X = model.simulate(win.inputs(net)[:-1], win.step.total_seconds(), x0, method=method)
     df = pd.DataFrame(X[:, :net.n_zones], index=win.frame.index, columns=[f"T:{z}" for z in net.zones])
     df.index = [t.isoformat() for t in df.index]
