@@ -278,3 +278,20 @@ def test_parameter_table_does_not_depend_on_identifys_blocks(outdir):
     (outdir / "identification.json").write_text(json.dumps(doc))
     rows = {cells[0]: cells for _, cells in _param_rows(_html(outdir))}
     assert "s/m" in rows["tau0"]
+
+
+def test_many_parameters_on_one_bound_are_counted_in_the_summary():
+    """A large building's local fits leave many zones' noise on a bound: the summary counts
+    them per group and bound (the parameter table lists every one); a few stay by name."""
+    from thermctl.report import _FLAGS_PER_GROUP, _bound_flags
+    n = _FLAGS_PER_GROUP + 2
+    rows = [{"parameter": f"sigma_q[z{i}]", "value": "0.1", "unit": "W s^0.5",
+             "on a bound": "lower bound 0.1 W s^0.5"} for i in range(n)]
+    rows += [{"parameter": "tau0", "value": "2.03", "unit": "s/m",
+              "on a bound": "upper bound 2.03 s/m"}]
+    out = _bound_flags(rows)
+    assert out == [f"sigma_q: {n} parameters at its lower bound 0.1 W s^0.5 (sigma_q[z0], "
+                   f"sigma_q[z1], sigma_q[z2], …; every one in the parameter table)",
+                   "tau0 = 2.03 s/m: at its upper bound 2.03 s/m"]
+    few = _bound_flags(rows[:2])
+    assert few == [f"sigma_q[z{i}] = 0.1 W s^0.5: at its lower bound 0.1 W s^0.5" for i in (0, 1)]

@@ -316,6 +316,31 @@ def _parameter_table(ident: dict) -> str:
     return head + _table(rows, classes=classes) + foot
 
 
+_FLAGS_PER_GROUP = 5
+"""Parameters of one group on the same bound listed by name in the summary; above, counted
+(a 490-zone building's local fits left 180 zones' heat noise on its lower bound)."""
+
+
+def _bound_flags(rows) -> list[str]:
+    """The summary's lines for parameters on a bound: by name, or per group and bound when
+    more than :data:`_FLAGS_PER_GROUP` share them (the parameter table lists every one)."""
+    def line(r):
+        return (f"{r['parameter']} = {r['value']} {r['unit']}: "
+                + ("" if r["on a bound"].startswith("set by") else "at its ") + r["on a bound"])
+    by = {}
+    for r in rows:
+        by.setdefault((r["parameter"].split("[")[0], r["on a bound"]), []).append(r)
+    out = []
+    for (group, bound), rs in by.items():
+        if len(rs) > _FLAGS_PER_GROUP:
+            names = ", ".join(r["parameter"] for r in rs[:3])
+            out.append(f"{group}: {len(rs)} parameters at its {bound} ({names}, …; every one "
+                       f"in the parameter table)")
+        else:
+            out += [line(r) for r in rs]
+    return out
+
+
 # ---------------------------------------------------------------------------- the top
 def _summary(outdir: Path, ident: dict | None, valid: dict | None, problems: list[str],
              left_out: bool = False) -> str:
@@ -350,9 +375,7 @@ def _summary(outdir: Path, ident: dict | None, valid: dict | None, problems: lis
     flags = []
     if g.get("params"):
         rows, _, flagged = _parameter_rows(ident)
-        flags = [f"{r['parameter']} = {r['value']} {r['unit']}: "
-                 + ("" if r["on a bound"].startswith("set by") else "at its ") + r["on a bound"]
-                 for r in rows if r["parameter"] in flagged]
+        flags = _bound_flags([r for r in rows if r["parameter"] in flagged])
     for key in ("grid", "estimate"):
         for b in ((ident or {}).get(key) or {}).get("active_bounds") or []:
             flags.append(f"{key}: {b}")
