@@ -549,7 +549,7 @@ def _print_validation(vr):
         t.add_row(z, *[f"{float(vr.to_data_units(r.rmse[z])):.2f}" for r in vr.open_loop.values()],
                   *[f"{float(vr.to_data_units(r.max_abs[z])):.2f}" for r in vr.open_loop.values()])
     if len(shown) < len(zones):
-        t.add_row(f"mean, {len(zones)}",
+        t.add_row("mean",
                   *[f"{float(vr.to_data_units(r.rmse_mean)):.2f}" for r in vr.open_loop.values()],
                   *["" for _ in vr.open_loop])
     console.print(t)
