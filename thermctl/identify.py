@@ -1003,8 +1003,7 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
         ua = li.ua_factor
         notes.append(f"the whole-building model has {net.n_states} states (> "
                      f"{opt.split.refit_max_states}): R̄_v per air path from the local problems, "
-                     "each zone's apertures and noise from its own problem, no whole-building "
-                     "refit and no intervals"
+                     "no whole-building refit and no intervals"
                      + ("; UA factor per wall class, median of the local fits: "
                         + ", ".join(f"{c} {f:.3g}" for c, f in ua.items()) if ua else ""))
     meta = _meta(meas, cal, val, opt, {})
@@ -1027,9 +1026,12 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
     else:
         # no whole-building fit: each zone's apertures, gain profile and noise from its
         # own local problem, so that the export has the disturbance inputs and a filter
-        params, at_bounds, pnotes = combine_zone_params(spec, li.problems, li.results)
+        params, at_bounds, pnotes = combine_zone_params(spec, li.results)
         notes += pnotes
         if params:
+            notes.append("solar apertures and noise (the export's disturbance inputs and "
+                         "Kalman filter): a measured zone's from its own local problem, an "
+                         "unmeasured zone's the median of the problems that reach it")
             meta["greybox"] = {
                 "criterion": "likelihood, one local problem per measured zone",
                 "source": "local", "params": params, "active_bounds": at_bounds,

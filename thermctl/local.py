@@ -536,20 +536,25 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     if problem.proposed is not None:
         cands, direction = list(problem.proposed), "backward"
     if not cands:
-        # nothing to select; the zone's apertures, gains and noise still come from here
-        # (the whole-building model of a large building takes them from this fit)
+        # nothing to select; the zone's apertures, gains and noise still come from here (the
+        # whole-building model of a large building takes them from this fit). Its UA factors
+        # are not reported: the problems that decide air paths set those, as before
+        reasons = {air_path_name(a, b): "out: not proposed" for a, b, _ in problem.candidates}
         est = _local_estimator(problem.network(), max_iter, solar=solar, fit_rows=fit_rows,
                                **options)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", BoundWarning)
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            est.fit(sub)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", BoundWarning)
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                est.fit(sub)
+        except Exception as exc:    # noqa: BLE001 - its verdicts stand without parameters
+            log.warning("local problem of %s: the fit for its parameters failed (%s); its "
+                        "zone gets the other zones' median noise", problem.zone, exc)
+            return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states,
+                               time=time.perf_counter() - t0, cpu=time.process_time() - c0,
+                               reasons=reasons)
         return LocalResult(problem.zone, [], {}, {}, float("nan"), n_states, int(est.n_obs_), 1,
-                           time.perf_counter() - t0, time.process_time() - c0,
-                           reasons={air_path_name(a, b): "out: not proposed"
-                                    for a, b, _ in problem.candidates},
-                           ua_factor=est.problem_.ua_factors(est.eta_) if _wall_factors(options)
-                           else {},
+                           time.perf_counter() - t0, time.process_time() - c0, reasons,
                            params=zone_params(problem, est.params_),
                            at_bounds=_renamed_bounds(problem, est))
     with warnings.catch_warnings():
@@ -1195,8 +1200,9 @@ class LocalIdentification:
         return {v.name: v.reason for v in self.verdicts}
 
     def model(self, spec: BuildingSpec, meta: dict | None = None):
-        """The whole-building model with the combined per-edge R̄_v and C_v = τ0/R̄_v, and
-        with ``wall_factors`` every wall of a class with a combined factor f at ``R/f``
+        """The whole-building model with the combined per-edge R̄_v and C_v = τ0/R̄_v, with
+        ``wall_factors`` every wall of a class with a combined factor f at ``R/f``, and with
+        ``internal_mass`` every measured zone at its own problem's capacity factor
         (:meth:`fitted_spec`)."""
         from .model import C_V_PAPER, RBAR_V_PAPER, ThermalModel
         net = ThermalNetwork(self.fitted_spec(spec), self.edges)
@@ -1211,10 +1217,18 @@ class LocalIdentification:
     def fitted_spec(self, spec: BuildingSpec) -> BuildingSpec:
         """``spec`` with the combined UA factors: every wall of a class (its class in
         ``spec``, :func:`thermctl.spec.wall_class`) with factor f gets all three resistances
-        ``R/f``, capacities kept — what the whole-building fit's
+        ``R/f``, capacities kept; and with capacity factors (``cap_factor[z]`` of a zone's
+        own problem, :func:`combine_zone_params`) every such zone the capacitance f·C_z
+        [J/K] — what the whole-building fit's
         :meth:`~thermctl.estimate.likelihood.LikelihoodProblem.fitted_network` does. Without
         factors, ``spec`` itself."""
         from dataclasses import replace
+        cap = {k[len("cap_factor["):-1]: v for k, v in combine_zone_params(spec, self.results)[0]
+               .items() if k.startswith("cap_factor[")}
+        if cap:
+            spec = replace(spec, zones=tuple(
+                replace(z, capacitance=float(cap[z.name]) * spec.zone_capacitance(z.name))
+                if z.name in cap else z for z in spec.zones))
         if not self.ua_factor:
             return spec
         zones = set(spec.zone_names)
@@ -1343,7 +1357,7 @@ def _zone_of(name: str):
 _NOISE_EVERY = (("sigma_q", False), ("sigma_v", True), ("sigma_phi", True))
 
 
-def combine_zone_params(spec: BuildingSpec, problems, results) -> tuple[dict, list, list]:
+def combine_zone_params(spec: BuildingSpec, results) -> tuple[dict, list, list]:
     """The whole building's apertures, gain profiles and noise from its local fits.
 
     A measured zone's parameters are those of its own problem, the one whose output it is
@@ -1358,7 +1372,6 @@ def combine_zone_params(spec: BuildingSpec, problems, results) -> tuple[dict, li
     ----------
     spec : BuildingSpec
         The whole building.
-    problems : list of LocalProblem
     results : list of LocalResult
 
     Returns

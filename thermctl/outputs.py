@@ -33,10 +33,11 @@ __all__ = ["staged_output", "write_outputs", "identification_document", "validat
            "STEP_RESPONSES_FILE"]
 
 
-# What thermctl writes into an output directory. The run outputs belong to one
 STEP_RESPONSES_FILE = "validation-step-responses.npz"
 """The step-response matrices of ``validate`` (:func:`write_step_responses`): 490 zones
 made 72 MB of JSON numbers, which nothing reads back as text."""
+
+# What thermctl writes into an output directory. The run outputs belong to one
 # identification: identify replaces all of them, so none of an earlier run's survive to be
 # mixed with the new one (issue 22). Files not in this list are never deleted.
 RUN_FILES = ("identification.json", "model.json", "validation.json", STEP_RESPONSES_FILE,
@@ -416,7 +417,8 @@ def identification_document(ident: Identification) -> dict:
         blocks.append({"section": "Structure", "kind": "table",
                        "title": "Highest SIN pair scores (walls included)",
                        "content": [{"pair": f"{a} – {b}", "score": s} for (a, b), s in top]})
-    if gb is not None:
+    if gb is not None or (doc.get("greybox") or {}).get("params"):
+        # a local model without a whole-building refit carries its zones' parameters too
         g = doc["greybox"]
         rows = [{"parameter": k, "value": v} for k, v in g["params"].items()]
         blocks.append({"section": "Parameters", "kind": "table",

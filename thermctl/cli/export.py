@@ -131,10 +131,12 @@ def export(
     point = ex.export_point(model, given, data=meas)
     console.print(escape(point.describe()), highlight=False, soft_wrap=True)
     dist = ex.disturbances(model)
-    kf = ex.kalman_filter(model, point.op, dt=dt,
-                          **({} if kalman_max_states is None else {"max_states": kalman_max_states}))
+    from ..export.kalman import KALMAN_DT_MAX_STATES
+    kf = ex.kalman_filter(model, point.op, dt=dt, max_states=kalman_max_states or KALMAN_DT_MAX_STATES)
     info = {"operating_point": point.to_dict(), "disturbances": dist.to_dict(),
             "model": str(model_path)}
+    if kf is not None and kf.note:
+        info["kalman_note"] = kf.note
     if dist.names:
         console.print(escape(f"disturbance inputs (identified): {', '.join(dist.names)}"),
                       highlight=False)
@@ -145,7 +147,8 @@ def export(
         console.print(f"no Kalman filter exported: the model has no identified noise model "
                       f"({why})", highlight=False)
     else:
-        src = (" from the local problems, each zone's own"
+        src = (" from the local problems (a measured zone's from its own, an unmeasured "
+               "zone's the median of those reaching it)"
                if (model.meta.get("greybox") or {}).get("source") == "local" else "")
         console.print(escape(f"Kalman filter: {len(kf.states)} states ({len(kf.states) - model.network.n_states} "
                              f"gain/sensor states), noise{src}: {kf.describe_noise()}"

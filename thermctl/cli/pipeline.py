@@ -541,7 +541,9 @@ def _print_validation(vr):
     ident = vr.open_loop["identified"]
     shown, title = zones, f"Open loop {vr.window[0]} → {vr.window[1]} ({vr.units})"
     if len(zones) > PRINT_ZONES:
-        shown = sorted(zones, key=lambda z: -float(ident.rmse[z]))[:PRINT_WORST]
+        # a zone without a finite error (no data in the window) sorts last
+        shown = sorted(zones, key=lambda z: -np.nan_to_num(float(ident.rmse[z]),
+                                                          nan=-np.inf))[:PRINT_WORST]
         title += f": the {len(shown)} of {len(zones)} zones the identified model predicts worst"
     t = Table("zone", *[f"RMSE {k}" for k in vr.open_loop], *[f"max {k}" for k in vr.open_loop],
               title=title)

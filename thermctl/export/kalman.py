@@ -18,10 +18,10 @@ __all__ = ["KalmanFilter", "kalman_filter", "augment_noise", "has_noise_model",
            "KALMAN_DT_MAX_STATES"]
 
 KALMAN_DT_MAX_STATES = 2000
-"""Filter states above which :func:`kalman_filter` leaves out the stationary gain at a
-sample time: its dense exponentials and Riccati equation cost ~n³. Measured at 707 states
-(49 zones): 5.4 s CPU (exponential 2.2 s, process noise 1.3 s, Riccati 1.8 s); about 2 min at
-2 000 states and an hour at 6 231 (490 zones)."""
+"""Filter states above which ``thermctl export --dt`` leaves out the stationary gain (the
+``max_states`` it gives :func:`kalman_filter`): its dense exponentials and Riccati equation
+cost ~n³. Measured at 707 states (49 zones): 5.4 s CPU (exponential 2.2 s, process noise
+1.3 s, Riccati 1.8 s); about 2 min at 2 000 states and an hour at 6 231 (490 zones)."""
 
 
 @dataclass
@@ -218,7 +218,7 @@ def augment_noise(params: dict, A0, cz, zones, measured):
 
 
 def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = None,
-                  max_states: int | None = KALMAN_DT_MAX_STATES):
+                  max_states: int | None = None):
     """The grey-box noise model of ``model.json`` at ``op`` (``None`` if it has none).
 
     Built from ``model.meta["greybox"]["params"]`` (:func:`augment_noise`): ``sigma_q``
@@ -238,8 +238,9 @@ def kalman_filter(model: ThermalModel, op: OperatingPoint, dt: float | None = No
         :func:`~thermctl.estimate.likelihood.kalman.process_noise_np`) and the stationary
         filter (:func:`~thermctl.estimate.likelihood.kalman.dare_np`).
     max_states : int or None
-        Above this many filter states the discrete filter is left out (dense, ~n³;
-        :data:`KALMAN_DT_MAX_STATES`) and :attr:`KalmanFilter.note` says so; None: no limit.
+        Above this many filter states the discrete filter is left out (dense, ~n³; the
+        command line uses :data:`KALMAN_DT_MAX_STATES`) and :attr:`KalmanFilter.note` says
+        so. None (default): no limit.
 
     Returns
     -------
