@@ -36,6 +36,12 @@ KSTEP_MAX_STATES = 150
 identify draws the same line for its whole-building refit. Measured on the 49-zone corridor
 (659 states): the three models' fits had not finished after 17 minutes (stopped)."""
 
+KSTEP_LOCAL_MAX_STATES = 2000
+"""Largest model identified by local problems whose k-step errors ``thermctl validate``
+computes by default above :data:`KSTEP_MAX_STATES`: each model's filter takes its noise from
+local fits (no whole-building fit) and is dense, ~n³. Measured on the 49-zone corridor (707
+filter states): 17 s CPU per model for the three horizons."""
+
 
 @dataclass
 class OpenLoopResult:
@@ -224,7 +230,7 @@ def _physical_fix(model: ThermalModel) -> tuple[dict, bool]:
 
 
 def kstep_validation(models: dict, calibration, validation,
-                     horizons_h=(1.0, 6.0, 24.0), solar=True) -> dict:
+                     horizons_h=(1.0, 6.0, 24.0), solar=True, params: dict | None = None) -> dict:
     """k-step-ahead prediction errors of several models on held-back data.
 
     Every model gets the same treatment: its walls and convection edges are held as they
@@ -243,6 +249,12 @@ def kstep_validation(models: dict, calibration, validation,
         [h]
     solar : bool
         Solar apertures on the data's ``solar:`` columns.
+    params : dict of str to dict, optional
+        Model name → its noise, aperture and gain parameters, one noise level per zone
+        (``sigma_v[z]``…; e.g. assembled from local problems,
+        :func:`thermctl.local.combine_zone_params`): those models are filtered at these
+        values, with no whole-building fit, and the models not named are left out (their
+        fit is what ``params`` avoids: a 49-zone model's took minutes to hours).
 
     Returns
     -------
@@ -257,6 +269,11 @@ def kstep_validation(models: dict, calibration, validation,
     out = {}
     for name, m in models.items():
         fix, per_edge = _physical_fix(m)
+        if params is not None:
+            if name in params:
+                out[name] = _kstep_at(m, fix, per_edge, params[name], validation, horizons_h,
+                                      solar)
+            continue
         est = LikelihoodEstimator(m.network, fix=fix or None, per_edge=per_edge, solar=solar,
                                rbar_v=np.asarray(m.rbar_v, float))
         with warnings.catch_warnings():
@@ -265,6 +282,23 @@ def kstep_validation(models: dict, calibration, validation,
         pb = est.problem_for(validation)
         out[name] = kstep_errors(pb, est.eta_, horizons=[h * 3600.0 for h in horizons_h])
     return out
+
+
+def _kstep_at(model, fix, per_edge, values, validation, horizons_h, solar):
+    """k-step errors of ``model`` with its noise, apertures and gains at ``values``."""
+    from .estimate.likelihood import LikelihoodEstimator, kstep_errors
+    from ._blas import single_thread_blas
+
+    est = LikelihoodEstimator(model.network, fix=fix or None, per_edge=per_edge, solar=solar,
+                              noise="zone", rbar_v=np.asarray(model.rbar_v, float))
+    pb = est.make_problem(validation, init=values)
+    missing = [p.name for p in pb.layout if not p.fixed and p.name not in values]
+    if missing:
+        raise ModelError(f"k-step errors: no value for {', '.join(missing[:5])}"
+                         f"{' …' if len(missing) > 5 else ''} (the given parameters do not "
+                         f"match the filter's)")
+    with single_thread_blas():
+        return kstep_errors(pb, pb.layout.eta0(), horizons=[h * 3600.0 for h in horizons_h])
 
 
 @dataclass
@@ -530,7 +564,8 @@ def support_note(vr: "ValidationReport") -> str:
 
 
 def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: ThermalModel | None = None,
-             horizons_h=(1.0, 6.0, 24.0), calibration=None, solar: bool = True) -> ValidationReport:
+             horizons_h=(1.0, 6.0, 24.0), calibration=None, solar: bool = True,
+             kstep_params: dict | None = None) -> ValidationReport:
     """Open-loop comparison on held-back data and the step-response matrix.
 
     Parameters
@@ -552,6 +587,9 @@ def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: 
         (:func:`kstep_validation`, its noise and gain parameters fitted there).
     solar : bool
         Solar apertures in the k-step filters.
+    kstep_params : dict, optional
+        With ``calibration``: the k-step filters' parameters per model, no fit
+        (:func:`kstep_validation`'s ``params``).
     """
     win = meas.window(start=start, duration=f"{hours}h")
     net = model.network
@@ -578,7 +616,7 @@ def validate(model: ThermalModel, meas, hours: float = 48.0, start=None, truth: 
     if truth is not None:
         errors = {name: relative_error(G[name], G["truth"]) for name in ("identified", "conduction-only")}
     ks = {} if calibration is None else kstep_validation(models, calibration, meas, horizons_h,
-                                                          solar=solar)
+                                                          solar=solar, params=kstep_params)
     return ValidationReport((str(win.start), str(win.end)), results, G, errors, tuple(horizons_h),
                             ms_min, list(net.zones), units=win.temperature_unit,
                             to_data_units=win.to_data_units, window_step_s=dt, kstep=ks)
