@@ -60,7 +60,8 @@ from .spec import WALL_CLASSES, BuildingSpec, Distance, Zone, wall_class
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
            "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble",
            "identify_local", "joint_local", "COMBINE_RULES",
-           "combine_ua_factors", "combine_zone_params", "zone_params"]
+           "combine_ua_factors", "combine_zone_params", "zone_params",
+           "conduction_zone_params"]
 
 log = logging.getLogger(__name__)
 
@@ -1416,6 +1417,41 @@ def combine_zone_params(spec: BuildingSpec, results) -> tuple[dict, list, list]:
                          f"({', '.join(miss[:5])}{', …' if len(miss) > 5 else ''}): the median "
                          f"of the others, {fill:.3g}")
     return out, bounds, notes
+
+
+def conduction_zone_params(spec: BuildingSpec, frame, *, workers: int | None = None,
+                           progress=None, latent_depth: int | None = 1,
+                           **options) -> tuple[dict, list]:
+    """Apertures and noise of the conduction-only model of ``spec``, by local problems.
+
+    One fit per measured zone of its local problem without air paths (:func:`fit_local`
+    with no candidate), combined as :func:`combine_zone_params` does: the filter of the
+    conduction-only model built the way a large building's identified model gets its own
+    (``thermctl validate`` compares their k-step errors without a whole-building fit).
+
+    Parameters
+    ----------
+    spec : BuildingSpec
+    frame : pandas.DataFrame
+        Calibration data.
+    workers, progress
+        As :func:`run_local`.
+    latent_depth : int or None
+        As :func:`local_problems`.
+    **options
+        :func:`fit_local` keywords (``solar``, ``fit_rows``…).
+
+    Returns
+    -------
+    params : dict
+    notes : list of str
+    """
+    from dataclasses import replace
+    probs = [replace(p, candidates=(), proposed=None)
+             for p in local_problems(spec, frame.columns, latent_depth=latent_depth)]
+    res = run_local(probs, frame, workers=workers, progress=progress, **options)
+    params, _, notes = combine_zone_params(spec, res)
+    return params, notes
 
 
 def combine_ua_factors(results) -> dict:

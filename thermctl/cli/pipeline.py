@@ -535,21 +535,15 @@ def _local_kstep_params(model, cal) -> dict:
     """The k-step filters' parameters of a model identified by local problems: its own
     (identify's local fits), and the conduction-only model's from one local fit per measured
     zone without air paths, on the same calibration days."""
-    from dataclasses import replace
-
-    from ..local import combine_zone_params, local_problems, run_local
-    spec = model.network.spec
+    from ..local import conduction_zone_params
     saved = model.meta.get("options", {})
     split = saved.get("split", {})
-    probs = [replace(p, candidates=(), proposed=None)
-             for p in local_problems(spec, cal.frame.columns,
-                                     latent_depth=split.get("latent_depth", 1))]
     with progress("validate") as bar:
-        res = run_local(probs, cal.frame, workers=split.get("workers"),
-                        progress=_progress_callback(bar),
-                        solar=saved.get("estimation", saved).get("solar", True),
-                        fit_rows=split.get("rows", "all"))
-    cond, _, _ = combine_zone_params(spec, res)
+        cond, _ = conduction_zone_params(
+            model.network.spec, cal.frame, workers=split.get("workers"),
+            progress=_progress_callback(bar), latent_depth=split.get("latent_depth", 1),
+            solar=saved.get("estimation", saved).get("solar", True),
+            fit_rows=split.get("rows", "all"))
     return {"identified": dict(model.meta["greybox"]["params"]), "conduction-only": cond}
 
 
