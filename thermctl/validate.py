@@ -266,39 +266,39 @@ def kstep_validation(models: dict, calibration, validation,
     from .errors import BoundWarning
     from .estimate.likelihood import LikelihoodEstimator, kstep_errors
 
+    from ._blas import single_thread_blas
+
     out = {}
     for name, m in models.items():
-        fix, per_edge = _physical_fix(m)
-        if params is not None:
-            if name in params:
-                out[name] = _kstep_at(m, fix, per_edge, params[name], validation, horizons_h,
-                                      solar)
+        if params is not None and name not in params:
             continue
+        fix, per_edge = _physical_fix(m)
+        # given parameters are one noise level per zone (a local model's)
         est = LikelihoodEstimator(m.network, fix=fix or None, per_edge=per_edge, solar=solar,
-                               rbar_v=np.asarray(m.rbar_v, float))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", BoundWarning)
-            est.fit(calibration)
-        pb = est.problem_for(validation)
-        out[name] = kstep_errors(pb, est.eta_, horizons=[h * 3600.0 for h in horizons_h])
+                                  rbar_v=np.asarray(m.rbar_v, float),
+                                  **({} if params is None else {"noise": "zone"}))
+        if params is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", BoundWarning)
+                est.fit(calibration)
+            pb, eta = est.problem_for(validation), est.eta_
+        else:
+            pb, eta = _problem_at(est, params[name], validation)
+        with single_thread_blas():
+            out[name] = kstep_errors(pb, eta, horizons=[h * 3600.0 for h in horizons_h])
     return out
 
 
-def _kstep_at(model, fix, per_edge, values, validation, horizons_h, solar):
-    """k-step errors of ``model`` with its noise, apertures and gains at ``values``."""
-    from .estimate.likelihood import LikelihoodEstimator, kstep_errors
-    from ._blas import single_thread_blas
-
-    est = LikelihoodEstimator(model.network, fix=fix or None, per_edge=per_edge, solar=solar,
-                              noise="zone", rbar_v=np.asarray(model.rbar_v, float))
+def _problem_at(est, values, validation):
+    """``est``'s problem on ``validation`` and its parameters at ``values`` (every free one
+    must be given)."""
     pb = est.make_problem(validation, init=values)
     missing = [p.name for p in pb.layout if not p.fixed and p.name not in values]
     if missing:
         raise ModelError(f"k-step errors: no value for {', '.join(missing[:5])}"
                          f"{' …' if len(missing) > 5 else ''} (the given parameters do not "
                          f"match the filter's)")
-    with single_thread_blas():
-        return kstep_errors(pb, pb.layout.eta0(), horizons=[h * 3600.0 for h in horizons_h])
+    return pb, pb.layout.eta0()
 
 
 @dataclass
