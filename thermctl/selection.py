@@ -21,7 +21,7 @@ from .model import ConvectionParameters
 from .estimate.likelihood import LikelihoodEstimator
 from .estimate.likelihood.scoring import CRITERIA, LikelihoodScorer
 from .network import ThermalNetwork
-from .structure.search import _cand, as_candidates, candidate_pairs, search_edges
+from .structure.search import RECHECK, _cand, as_candidates, candidate_pairs, search_edges
 
 __all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "judge_air_paths", "CRITERIA",
            "per_path_rbar", "shared_start"]
@@ -124,7 +124,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
                      ahead=None, swaps=None, adds: bool = False, known=None,
-                     final=None,
+                     final=None, recheck: float | None = RECHECK,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -195,6 +195,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     known : dict, optional
         Structures fitted already with the same data and model options (another
         selection's :attr:`SelectionResult.trials`); taken instead of fitted again.
+    recheck : float or None
+        After a removal the backward pass tries again only the edges whose removal cost on
+        an earlier structure was below ``recheck × margin``, and every edge before it stops
+        (:func:`~thermctl.structure.search.search_edges`) [-]; None: every edge every round.
     final : LikelihoodEstimator, optional
         The final fit of the ``candidates``' structure, made already (another selection's
         :attr:`SelectionResult.estimator`): returned, not refitted, when the search keeps
@@ -228,7 +232,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     swaps = None if swaps is None else [by_name.get(c.name, c) for c in as_candidates(spec, swaps)]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
                        margin=margin, progress=progress, workers=workers, swaps=swaps,
-                       adds=adds, known=known)
+                       adds=adds, known=known, recheck=recheck)
     est, cur = res.fitted, res.edges
     per_edge = per_path_rbar(est) if cur else {}
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])

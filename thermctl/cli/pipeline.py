@@ -100,6 +100,11 @@ def identify(
                               "swap is made, add the air path (any measured pair) that "
                               "improves BIC by more than --margin with a daily-gain t >= 2, "
                               "then prune again."),
+    recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
+                                  help="--selection model, whole building: after a removal "
+                                  "the backward pass tries again only the air paths whose "
+                                  "removal cost was below this × --margin, and every path "
+                                  "before it stops (0: every path every round)."),
     internal_mass: bool = typer.Option(_D.estimation.internal_mass, help="Kalman criteria: fit a "
                                        "capacity factor per measured zone (internal mass the "
                                        "spec omits)."),
@@ -280,6 +285,7 @@ def identify(
                                    criterion=selection_criterion, margin=margin,
                                    min_t=min_t, predict_t=predict_t,
                                    misfit_ratio=misfit_ratio, swaps=swaps, adds=adds,
+                                   recheck=recheck or None,
                                    stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
