@@ -135,7 +135,7 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
         row["estimation"] = dict(estimation)
     if selection:
         row["selection"] = dict(selection)
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.process_time()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -146,6 +146,9 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
         row["error"] = f"{type(exc).__name__}: {str(exc)[:120]}"
         return row
     row["identify_s"] = round(time.perf_counter() - t1, 1)
+    row["identify_cpu"] = round(time.process_time() - c1, 1)      # since session 31
+    if ident.selection is not None:
+        row["fits"] = int(ident.selection.n_fits)
     model = ident.model
     found = {tuple(sorted((e.a, e.b))) for e in model.network.convection_edges}
     row["found"] = sorted(found)
@@ -308,6 +311,9 @@ def main(argv=None):
     ap.add_argument("--shared-rbar", action="store_true",
                     help="identify's --shared-rbar: one R̄_v even where the misfit check runs "
                          "(case names get ' [shared]')")
+    ap.add_argument("--recheck", type=float, default=None, metavar="R",
+                    help="identify's --recheck (0: the backward pass tries every path every "
+                         "round, the search before session 31; case names get ' [recheck R]')")
     ap.add_argument("--misfit-ratio", type=float, default=None, metavar="R",
                     help="identify's --misfit-ratio (0: no misfit check; case names get "
                          "' [misfit R]'; default rows before session 17 ran without the check)")
@@ -396,6 +402,9 @@ def main(argv=None):
         if args.no_adds:
             sel["adds"] = False
             name += " [no adds]"
+        if args.recheck is not None:
+            sel["recheck"] = args.recheck or None
+            name += f" [recheck {args.recheck:g}]"
         if args.misfit_ratio is not None:
             sel["misfit_ratio"] = args.misfit_ratio
             name += f" [misfit {args.misfit_ratio:g}]"
