@@ -51,8 +51,23 @@ def test_combine_takes_a_zones_own_problem_the_median_for_the_rest_and_fills_gap
     assert out["sigma_v[r2]"] == pytest.approx(0.03) and out["sigma_q[r2]"] == 600.0
     assert "aperture[r2,solar:s]" not in out
     assert any(n.startswith("sigma_v of 1 zone(s)") and "r2" in n for n in notes)
-    # only a zone's own parameters report their bounds
+    # a zone's own parameters report their bounds; the hallway's aperture is on its bound
+    # in one of the two problems that fit it, and their median (3.0) is not
     assert bounds == ["sigma_v[r1] at its lower bound 0.0001 [K]"]
+
+
+def test_a_median_on_the_bound_most_problems_reached_is_reported_there(small_spec):
+    low = "lower bound 0.1 [W s^0.5]"
+    res = [_res("r1", {"sigma_q[r1]": 400.0, "sigma_q[hallway]": 0.1, "tau_g": 600.0},
+                bounds=[f"sigma_q[hallway] at its {low}", "tau_g at its lower bound 600 [s]"]),
+           _res("r2", {"sigma_q[r2]": 300.0, "sigma_q[hallway]": 0.1, "tau_g": 2000.0},
+                bounds=[f"sigma_q[hallway] at its {low}"]),
+           _res("r3", {"sigma_q[r3]": 200.0, "sigma_q[hallway]": 900.0, "tau_g": 3000.0})]
+    out, bounds, _ = combine_zone_params(small_spec, res)
+    assert out["sigma_q[hallway]"] == 0.1 and out["tau_g"] == 2000.0
+    # the hallway's heat noise: on its bound in 2 of 3 problems, and so is the median; the
+    # building-level tau_g: in 1 of 3, its median 2000 s is not
+    assert bounds == [f"sigma_q[hallway] at its {low} (in 2 of 3 local problems)"]
 
 
 @pytest.fixture(scope="module")

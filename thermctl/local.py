@@ -47,6 +47,7 @@ import math
 import time
 import uuid
 import warnings
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -1381,10 +1382,11 @@ def combine_zone_params(spec: BuildingSpec, results) -> tuple[dict, list, list]:
         Names and units as :class:`~thermctl.estimate.likelihood.LikelihoodEstimator`'s
         ``params_`` with one noise level per zone.
     at_bounds : list of str
-        The measured zones' own parameters that ended on a bound.
+        The measured zones' own parameters that ended on a bound, and the medians of values
+        that ended on the same bound in more than half of the problems that fit them.
     notes : list of str
     """
-    own, shared, latent, bounds = {}, {}, {}, []
+    own, shared, latent, bounds, sides = {}, {}, {}, [], {}
     for r in results:
         if r.error is not None or not r.params:
             continue
@@ -1396,12 +1398,24 @@ def combine_zone_params(spec: BuildingSpec, results) -> tuple[dict, list, list]:
                 own[k] = v
             else:
                 latent.setdefault(k, []).append(v)
-        bounds += [b for b in r.at_bounds if _zone_of(b.partition(" at its ")[0]) == r.zone]
+        for b in r.at_bounds:
+            name, _, side = b.partition(" at its ")
+            if _zone_of(name) == r.zone:
+                bounds.append(b)
+            else:
+                sides.setdefault(name, []).append(side)
     out = dict(own)
     for k, vs in latent.items():
         out.setdefault(k, float(np.median(vs)))
     for k, vs in shared.items():
         out[k] = float(np.median(vs))
+    for k, ss in sides.items():
+        # a median of values on the same bound in most problems is on it too
+        vs = latent.get(k, []) if k not in own else []
+        vs = shared.get(k, vs)
+        side, n = Counter(ss).most_common(1)[0] if ss else ("", 0)
+        if vs and 2 * n > len(vs):
+            bounds.append(f"{k} at its {side} (in {n} of {len(vs)} local problems)")
     notes = []
     measured = set(spec.measured_zones)
     for group, only_measured in _NOISE_EVERY:
