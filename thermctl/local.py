@@ -1410,10 +1410,11 @@ def combine_zone_params(spec: BuildingSpec, results) -> tuple[dict, list, list]:
     for k, vs in shared.items():
         out[k] = float(np.median(vs))
     for k, ss in sides.items():
+        if k in own:            # a measured zone's own problem decides its value
+            continue
         # a median of values on the same bound in most problems is on it too
-        vs = latent.get(k, []) if k not in own else []
-        vs = shared.get(k, vs)
-        side, n = Counter(ss).most_common(1)[0] if ss else ("", 0)
+        vs = shared.get(k) or latent.get(k, [])
+        side, n = Counter(ss).most_common(1)[0]
         if vs and 2 * n > len(vs):
             bounds.append(f"{k} at its {side} (in {n} of {len(vs)} local problems)")
     notes = []
