@@ -391,6 +391,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             if not tried:
                 full = True
                 continue
+            skipped = len(cur) - len(tried)         # strong on an earlier structure
             trials = {}
             rests = {c.name: [x for x in cur if x != c] for c in tried}
             fit_missing(rests.values())
@@ -410,7 +411,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             pick = (min(weak, key=lambda k: weak[k][0]) if weak
                     else min(trials, key=lambda k: trials[k][0]))
             d, f2, v2 = trials[pick]
-            if not (d < margin or pick in weak) and len(tried) < len(cur):
+            if not (d < margin or pick in weak) and skipped:
                 full = True             # none of the edges tried goes: try them all
                 continue
             if d < margin or pick in weak:
@@ -420,8 +421,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 fitted, val = f2, v2
                 why = (f"its gain is not consistent: {weak[pick][1]}" if pick in weak
                        else f"it improves the criterion by less than the margin {margin:g}")
-                if len(tried) < len(cur) + 1:
-                    why += (f"; {len(cur) + 1 - len(tried)} edge(s) not tried again (removal "
+                if skipped:
+                    why += (f"; {skipped} edge(s) not tried again (removal "
                             f"cost above {recheck * margin:g} on an earlier structure)")
                 path.append(SelectionStep("remove", pick, val, d, [x.name for x in cur],
                                           {k: t[0] for k, t in trials.items()}, note=why))
