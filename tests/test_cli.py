@@ -131,6 +131,42 @@ def test_validate_leaves_kstep_out_above_the_state_limit_and_says_so(identified,
     assert "│ mean │" in out
 
 
+def test_validate_kstep_asked_above_the_limit_says_what_it_costs(identified, tb_dir, tmp_path,
+                                                                 monkeypatch):
+    import thermctl.validate as V
+
+    monkeypatch.setattr(V, "KSTEP_MAX_STATES", 10)      # this model has more states
+    asked = []
+    real = V.validate
+
+    def spy(*a, calibration=None, **k):                 # the filters are not what is tested
+        asked.append(calibration is not None)
+        return real(*a, calibration=None, **k)
+
+    monkeypatch.setattr(V, "validate", spy)
+    res = run("validate", identified / "model.json", tb_dir / "data.csv", "--hours", 24,
+              "--kstep", "--out", tmp_path)
+    assert res.exit_code == 0, res.output
+    assert asked == [True]                              # asked for: computed, not refused
+    notes = json.loads((tmp_path / "validation.json").read_text())["notes"]
+    cost = [t for t in notes if t.startswith("k-step-ahead errors asked for a model of")]
+    assert len(cost) == 1 and "above the default limit 10" in cost[0], notes
+    assert cost[0] in " ".join(res.output.split())
+
+
+def test_kstep_cost_grows_as_the_cube_of_the_states():
+    from thermctl.validate import KSTEP_LOCAL_MAX_STATES, KSTEP_MAX_STATES, kstep_cost_note
+
+    assert kstep_cost_note(KSTEP_MAX_STATES, local=False) is None
+    assert kstep_cost_note(KSTEP_LOCAL_MAX_STATES, local=True) is None
+    # 17 s per model at 707 states: 8× the states is 512× the time, 2.4 h
+    assert "about 2.4 h of CPU per model" in kstep_cost_note(8 * 707, local=True)
+    assert "about 17 s" not in (kstep_cost_note(2001, local=True) or "")
+    assert "about 6 min" in kstep_cost_note(2001, local=True)       # 17·(2001/707)³ = 385 s
+    # whole-building: 17 min for three models at 659 states is a lower bound
+    assert "at least 6 min of CPU per model" in kstep_cost_note(659, local=False)
+
+
 def test_export_roundtrip(identified, tmp_path):
     from thermctl.io import load_statespace
     res = run("export", identified / "model.json", "--statespace", tmp_path / "ss.npz",

@@ -489,7 +489,7 @@ def validate(
                           or _saved_window(model, "validation"))
     truth_model = _truth_model(truth, data, spec)
     notes = []
-    from ..validate import KSTEP_LOCAL_MAX_STATES, KSTEP_MAX_STATES
+    from ..validate import KSTEP_LOCAL_MAX_STATES, KSTEP_MAX_STATES, kstep_cost_note
     n = model.network.n_states
     # a large model of local problems: each model's filter from local fits, no
     # whole-building fit (which is what takes minutes to hours above KSTEP_MAX_STATES)
@@ -503,6 +503,10 @@ def validate(
                          "model's filter takes minutes to hours); --kstep computes them")
             console.print(f"note: {notes[-1]}")
             logger.info("validate: %s", notes[-1])
+    elif kstep and (cost := kstep_cost_note(n, local)) is not None:
+        notes.append(cost)
+        console.print(f"note: {cost}")
+        logger.warning("validate: %s", cost)
     kparams = None
     if kstep and local:
         kparams = _local_kstep_params(model, cal)
