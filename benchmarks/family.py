@@ -187,7 +187,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 31
+SESSION = 32
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -314,6 +314,10 @@ def main(argv=None):
     ap.add_argument("--recheck", type=float, default=None, metavar="R",
                     help="identify's --recheck (0: the backward pass tries every path every "
                          "round, the search before session 31; case names get ' [recheck R]')")
+    ap.add_argument("--noise-step", choices=("log", "asinh"), default=None,
+                    help="how L-BFGS-B moves noise intensities (thermctl.estimate.likelihood."
+                         "optimize.NOISE_STEP; log: before session 32; case names get "
+                         "' [noise step S]')")
     ap.add_argument("--misfit-ratio", type=float, default=None, metavar="R",
                     help="identify's --misfit-ratio (0: no misfit check; case names get "
                          "' [misfit R]'; default rows before session 17 ran without the check)")
@@ -405,6 +409,10 @@ def main(argv=None):
         if args.recheck is not None:
             sel["recheck"] = args.recheck or None
             name += f" [recheck {args.recheck:g}]"
+        if args.noise_step is not None:
+            from thermctl.estimate.likelihood import optimize
+            optimize.NOISE_STEP = args.noise_step
+            name += f" [noise step {args.noise_step}]"
         if args.misfit_ratio is not None:
             sel["misfit_ratio"] = args.misfit_ratio
             name += f" [misfit {args.misfit_ratio:g}]"

@@ -818,3 +818,32 @@ def test_an_air_path_beside_a_wall_is_compared_with_the_wall(spec5):
     _beside_wall_note(spec5, ThermalNetwork(spec5, convection=[("r1", "r3")]), {}, RBAR_TRUE,
                       notes)
     assert notes == []
+
+
+# ---------------------------------------------------------------------------- noise step
+def _fit_with_noise_step(monkeypatch, step, net, data, opts):
+    from thermctl.estimate.likelihood import optimize
+    monkeypatch.setattr(optimize, "NOISE_STEP", step)
+    return LikelihoodEstimator(net, options=opts).fit(data)
+
+
+def test_noise_step_asinh_and_log_reach_the_same_interior_optimum(sim5, net5, monkeypatch):
+    data, opts = sim5
+    a = _fit_with_noise_step(monkeypatch, "asinh", net5, data, opts)
+    b = _fit_with_noise_step(monkeypatch, "log", net5, data, opts)
+    # 0.03 K of sensor noise: every σ inside its bounds; the two steps are two paths to
+    # one optimum
+    assert a.nll_ == pytest.approx(b.nll_, abs=1e-3)
+    assert a.rbar_v_ == pytest.approx(b.rbar_v_, rel=1e-3)
+    assert a.params_["sigma_v"] == pytest.approx(b.params_["sigma_v"], rel=1e-3)
+
+
+def test_noise_step_asinh_takes_a_needless_noise_to_its_bound(net5, monkeypatch):
+    # no sensor noise at all: σ_v's optimum is its lower bound 1e-4 K, where the likelihood
+    # is flat in log σ_v
+    data, opts = simulate_self_consistent(net5, days=4, seed=2, sv=1e-7)
+    a = _fit_with_noise_step(monkeypatch, "asinh", net5, data, opts)
+    b = _fit_with_noise_step(monkeypatch, "log", net5, data, opts)
+    assert a.params_["sigma_v"] == pytest.approx(1e-4, rel=1e-3)
+    assert a.nll_ <= b.nll_ + 1e-3
+    assert a.result_.iterations < b.result_.iterations
