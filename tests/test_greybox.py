@@ -847,3 +847,19 @@ def test_noise_step_asinh_takes_a_needless_noise_to_its_bound(net5, monkeypatch)
     assert a.params_["sigma_v"] == pytest.approx(1e-4, rel=1e-3)
     assert a.nll_ <= b.nll_ + 1e-3
     assert a.result_.iterations < b.result_.iterations
+
+
+def test_scorer_lets_its_start_converge_and_caps_the_trials_warm_from_it(sim5, net5):
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+
+    data, opts = sim5
+    (c,) = [c for c in candidate_pairs(net5.spec) if {c.a, c.b} == {"r2", "r3"}]
+    sc = LikelihoodScorer(net5.spec, data, max_iter=3, start_iter=1000, options=opts)
+    start, v_start = sc.fit([c])                # cold: the search's start
+    trial, v_trial = sc.fit([], warm=start)     # a removal trial, warm from it
+    assert start.result_.success and start.result_.iterations > 3
+    assert trial.result_.iterations <= 3
+    # the same start with the trials' cap stops short of the converged likelihood
+    capped, v_capped = LikelihoodScorer(net5.spec, data, max_iter=3, start_iter=3,
+                                        options=opts).fit([c])
+    assert v_capped > v_start + 1.0

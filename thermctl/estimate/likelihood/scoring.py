@@ -56,7 +56,14 @@ class LikelihoodScorer:
         optimises each candidate's R̄_v (a problem and a 1-D fit per candidate, ~5–10×
         slower).
     max_iter : int
-        Per full fit.
+        Per full fit warm-started from another (removal, addition and swap trials).
+    start_iter : int
+        Per cold fit: the search's start, from which the first trials are warm-started.
+        A start stopped short by ``max_iter`` hands its unfinished descent to every trial:
+        on the twin house N2 the 9-path start stopped at 200 iterations and each of its 8
+        removal trials spent most of its own 200 on the same noise parameters. Converged
+        (443 evaluations) the trials took 22–194, the same structures ended at the same
+        likelihoods (within 0.7 nat) and the selection used 14 % fewer evaluations.
     tol : float
         Tolerance of the selection's fits on the likelihood per observation [-]. 1e-7 gave
         the same edges with 21 % less CPU on the 25-zone corridor's local problems (and
@@ -88,7 +95,8 @@ class LikelihoodScorer:
     """
 
     def __init__(self, spec, data, criterion: str = "bic", holdout: float = 0.3,
-                 screen: str = "grid", max_iter: int = 200, tol: float = 1e-9, on_fit=None,
+                 screen: str = "grid", max_iter: int = 200, start_iter: int = 1000,
+                 tol: float = 1e-9, on_fit=None,
                  min_t: float = 0.0, block: float = 86400.0, predict_t: float | None = None,
                  predict_horizon: float = 6 * 3600.0, **estimator_kwargs):
         if criterion not in CRITERIA:
@@ -101,6 +109,7 @@ class LikelihoodScorer:
         self.kw = dict(estimator_kwargs)
         self.kw.pop("per_edge", None)
         self.max_iter = max_iter
+        self.start_iter = start_iter
         self.tol = tol
         self.on_fit = on_fit
         self.min_t = float(min_t)
@@ -171,6 +180,7 @@ class LikelihoodScorer:
         same questions of the same data (options, criterion, rows), else EstimationError."""
         same = (other.kw == self.kw and other.criterion == self.criterion
                 and other.tol == self.tol and other.max_iter == self.max_iter
+                and other.start_iter == self.start_iter
                 and _same_data(other.train, self.train))
         if not same:
             raise EstimationError("adopt: the fits started ahead used other options or data "
@@ -346,8 +356,10 @@ class LikelihoodScorer:
     # ---- internals --------------------------------------------------------------------
     def _fit(self, edges, init=None, fix=None, max_iter=None, count=True, stop=None):
         net = ThermalNetwork(self.spec, [c.pair + (c.d,) for c in edges])
+        if max_iter is None:
+            max_iter = self.start_iter if init is None and fix is None else self.max_iter
         est = LikelihoodEstimator(net, per_edge=True, fix=fix, tol=self.tol,
-                                  max_iter=max_iter or self.max_iter, **self.kw)
+                                  max_iter=max_iter, **self.kw)
         if stop is not None:
             est.make_problem = _stoppable(est.make_problem, stop)
         with ignore_warnings(BoundWarning, ConvergenceWarning):
