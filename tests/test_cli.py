@@ -165,6 +165,7 @@ def test_kstep_cost_grows_as_the_cube_of_the_states():
     assert "about 6 min" in kstep_cost_note(2001, local=True)       # 17·(2001/707)³ = 385 s
     # whole-building: 17 min for three models at 659 states is a lower bound
     assert "at least 6 min of CPU per model" in kstep_cost_note(659, local=False)
+    assert "minutes per model" in kstep_cost_note(KSTEP_MAX_STATES + 1, local=False)
 
 
 def test_export_roundtrip(identified, tmp_path):

@@ -21,7 +21,8 @@ from .errors import ModelError
 from .model import ConvectionParameters, ThermalModel, zoh
 
 __all__ = ["OpenLoopResult", "open_loop", "step_response_matrix", "EXACT_LIMIT",
-           "KSTEP_MAX_STATES", "kstep_cost_note", "relative_error", "minimum_flows", "kstep_validation",
+           "KSTEP_MAX_STATES", "kstep_cost_note", "relative_error", "minimum_flows",
+           "kstep_validation",
            "ValidationReport", "validate", "Verdict", "verdict", "relative_words", "support_note"]
 
 VERDICT_MARGIN = 0.05
@@ -62,7 +63,8 @@ def kstep_cost_note(n_states: int, local: bool) -> str | None:
     -----
     Extrapolated as n³ from the two measurements above: 17 s CPU per model at 707 filter
     states with local fits; with a whole-building fit, three models unfinished after
-    17 minutes at 659 states, so the figure is a lower bound.
+    17 minutes at 659 states, so the figure is a lower bound (and not extrapolated below
+    that size).
     """
     limit = KSTEP_LOCAL_MAX_STATES if local else KSTEP_MAX_STATES
     if n_states <= limit:
@@ -70,9 +72,12 @@ def kstep_cost_note(n_states: int, local: bool) -> str | None:
     if local:
         per_model = 17.0 * (n_states / 707.0) ** 3
         cost = f"about {_duration(per_model)} of CPU per model"
-    else:
+    elif n_states >= 659:
         per_model = 17.0 * 60.0 / 3 * (n_states / 659.0) ** 3
         cost = f"at least {_duration(per_model)} of CPU per model (a whole-building fit each)"
+    else:       # below the measured size an n³ extrapolation says nothing: say what is known
+        cost = ("minutes per model (a whole-building fit each; at 659 states three models "
+                "had not finished after 17 minutes)")
     return (f"k-step-ahead errors asked for a model of {n_states} states, above the default "
             f"limit {limit}: each model's filter is dense (~n³), {cost}")
 
