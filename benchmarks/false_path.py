@@ -30,6 +30,14 @@ The ``nights only`` rows count the default's samples (3 h after the supply went 
 BIC − BIC(T): a search that ends above the true structure lost it in the search, not in the
 likelihood (session 25: the open plan's found structure is 62.0 above T).
 
+``--family`` asks that of every building of the broadened family (``benchmarks/family.py
+--study family``) whose latest default row selected other paths than the truth: cold fits of
+the truth ``T``, of the selection ``S`` and of their union, each by the selection's scorer
+on the building's own data. ``S − T`` above 0: the likelihood prefers the truth and the
+search did not reach it; below 0: the likelihood itself prefers what was selected (a false
+path that a better search would keep as well). ``T ∪ S − T`` below −10: the false paths
+gain on top of the truth.
+
 Usage::
 
     python benchmarks/false_path.py                   # every row (1-4 CPU min each)
@@ -38,6 +46,7 @@ Usage::
     python benchmarks/false_path.py --building open-plan \
         --fit "p00-p10 p00-p12 p01-p02 p01-p11 p10-p11 p11-p12" \
               "p00-p10 p00-p12 p01-p02 p01-p11 p10-p11 p11-p12 p02-p12"
+    python benchmarks/false_path.py --family [--cases "open-plan (fd)|0" ...]
 """
 
 from __future__ import annotations
@@ -196,6 +205,42 @@ def fit_structures(building, structures):
             print(f"| {words} | {b - bT:+.1f} | {time.process_time() - t0:.0f} s |", flush=True)
 
 
+def family_errors(cases=None):
+    """Print, for every wrong selection of the broadened family (the latest default rows of
+    ``family.RUNS``), the cold BIC of the selection ``S`` and of ``T ∪ S`` against the
+    truth ``T``. ``cases``: "case|seed" strings (default: every wrong one)."""
+    import json
+    rows = [json.loads(line) for line in family.RUNS.read_text().splitlines() if line.strip()]
+    rows = [r for r in family.latest(rows) if r["study"] == "family" and "[" not in r["case"]
+            and "error" not in r]
+    print("| building | seed | T | S: missed, false | S − T | T ∪ S − T | CPU s |")
+    print("|---|---|---|---|---|---|---|")
+    for r in sorted(rows, key=lambda r: (r["case"], r["seed"])):
+        T = sorted(tuple(sorted(p)) for p in r["true"])
+        S = sorted(tuple(sorted(p)) for p in r["found"])
+        if cases is not None and f"{r['case']}|{r['seed']}" not in cases or (
+                cases is None and S == T):
+            continue
+        layout, plant = r["case"].removesuffix(")").split(" (")
+        BUILDINGS["_family"] = (dict(family.ALL, **family.LAYOUTS[layout], plant=plant), None)
+        t0 = time.process_time()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            meas, true = data("_family", {"_seed": r["seed"]}, False)
+            # a path to a hidden zone is in the plant, not in what a model can select
+            if sorted(true) != sorted(T + [tuple(sorted(p)) for p in r["hidden_true"]]):
+                raise SystemExit(f"{r['case']} seed {r['seed']}: the building generated now "
+                                 f"has other true paths than the row ({true} against {T})")
+            sc = selection_scorer(meas)
+            bic = {name: sc.fit([_cand(sc.spec, p) for p in st])[1]
+                   for name, st in (("T", T), ("S", S), ("U", sorted(set(T) | set(S))))}
+        missed = ", ".join("-".join(p) for p in T if p not in S) or "—"
+        false = ", ".join("-".join(p) for p in S if p not in T) or "—"
+        print(f"| {r['case']} | {r['seed']} | {len(T)} | {missed}; {false} | "
+              f"{bic['S'] - bic['T']:+.1f} | {bic['U'] - bic['T']:+.1f} | "
+              f"{time.process_time() - t0:.0f} |", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--building", choices=list(BUILDINGS), default="l-shape",
@@ -207,7 +252,15 @@ def main(argv=None):
     ap.add_argument("--fit", nargs="+", metavar="STRUCTURE",
                     help='fit these structures instead (each a quoted list of "a-b" paths) '
                          "and print BIC - BIC(T)")
+    ap.add_argument("--family", action="store_true",
+                    help="every wrong selection of the broadened family: cold BIC of the "
+                         "selection and of its union with the truth against the truth")
+    ap.add_argument("--cases", nargs="+", metavar="CASE|SEED",
+                    help='with --family: only these, e.g. "open-plan (fd)|0"')
     args = ap.parse_args(argv)
+    if args.family:
+        family_errors(args.cases)
+        return
     if args.fit:
         fit_structures(args.building, args.fit)
         return

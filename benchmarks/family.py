@@ -187,7 +187,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 32
+SESSION = 33
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -306,6 +306,8 @@ def main(argv=None):
                     help="identify's --no-adds (case names get ' [no adds]'; session 22's rows "
                          "named ' [adds]' were run when additions were an option: --table "
                          "shows them as the default)")
+    ap.add_argument("--union", action="store_true",
+                    help="identify's --union (case names get ' [union]')")
     ap.add_argument("--per-edge", action="store_true",
                     help="identify's --per-edge (case names get ' [per edge]')")
     ap.add_argument("--shared-rbar", action="store_true",
@@ -406,6 +408,9 @@ def main(argv=None):
         if args.no_adds:
             sel["adds"] = False
             name += " [no adds]"
+        if args.union:
+            sel["union"] = True
+            name += " [union]"
         if args.recheck is not None:
             sel["recheck"] = args.recheck or None
             name += f" [recheck {args.recheck:g}]"

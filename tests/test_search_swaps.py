@@ -426,3 +426,40 @@ def test_skipping_strong_paths_removes_what_trying_every_path_removes_on_the_lik
         assert e1 == e2 and d1 == pytest.approx(d2, rel=1e-9, abs=1e-6)
     assert lazy.path[-1].screened == pytest.approx(every.path[-1].screened, rel=1e-9)
     assert lazy.n_fits < every.n_fits
+
+
+# ---------------------------------------------------------------------------- union pass
+A, B, C = cand("p", "q"), cand("q", "r"), cand("r", "s")
+W = Candidate("p", "s", 3.0, True, False)       # beside a wall
+
+
+def test_the_union_pass_keeps_two_paths_that_only_pay_together():
+    # B and C gain 5 each alone (below the margin: no addition enters) and 40 together; W,
+    # beside a wall, screens -6 and stays out of the union
+    single = {A.name: 200.0, B.name: 5.0, C.name: 5.0, W.name: 6.0}
+    joint = {frozenset((A.name, B.name, C.name)): 240.0,
+             frozenset((A.name, B.name, C.name, W.name)): 246.0}
+    kw = dict(direction="backward", margin=10.0, swaps=[A, B, C, W], adds=True)
+    plain = search_edges([A], TableScorer(single, joint), **kw)
+    assert [c.name for c in plain.edges] == [A.name]
+    sc = TableScorer(single, joint)
+    res = search_edges([A], sc, union=True, **kw)
+    assert sorted(c.name for c in res.edges) == sorted((A.name, B.name, C.name))
+    assert res.value == pytest.approx(100.0 - 240.0)
+    step = next(st for st in res.path if st.action == "union")
+    assert step.delta == pytest.approx(-40.0)
+    assert W.name not in step.edges and frozenset((A.name, B.name, C.name)) in sc.fits
+    assert "in by the union pass (addition screened bic -5.0)" in res.reasons[B.name]
+    assert "removing it costs bic +35.0" in res.reasons[B.name]
+
+
+def test_a_union_pass_that_ends_no_lower_is_undone():
+    # together B and C gain only 8: the backward pass removes both and ends where it began
+    single = {A.name: 200.0, B.name: 5.0, C.name: 5.0}
+    joint = {frozenset((A.name, B.name, C.name)): 208.0}
+    res = search_edges([A], TableScorer(single, joint), direction="backward", margin=10.0,
+                       swaps=[A, B, C], adds=True, union=True)
+    assert [c.name for c in res.edges] == [A.name]
+    assert res.value == pytest.approx(100.0 - 200.0)
+    assert res.path[-1].action == "undo" and "no lower than the selection" in res.path[-1].note
+    assert "tried as an addition, best screening bic change -5.0" in res.reasons[B.name]

@@ -157,6 +157,11 @@ class SelectionOptions:
         recall 0.88 → 1.00 with 0.22 → 0.06 false paths per building (Pugh Hall with a
         door, seed 0: 1/4 and 3 false → 4/4); the factor study and the twin house select
         what they did (docs/identification.md, "Additions"). Default on.
+    union : bool
+        With ``adds``: a last backward pass from the selection and every path away from
+        walls whose addition screened below 0 (it stands when its BIC is lower). Off by
+        default until measured on the families (docs/identification.md, "Which errors a
+        better search could fix").
     recheck : float or None
         Whole-building fits: after a removal, the backward pass tries again only the air
         paths whose removal cost on an earlier structure of the pass was below ``recheck ×
@@ -189,6 +194,7 @@ class SelectionOptions:
     misfit_ratio: float = MISFIT_RATIO
     swaps: bool = True
     adds: bool = True
+    union: bool = False
     recheck: float | None = RECHECK
     stability: int = 0
     stability_threshold: float = 0.6
@@ -209,7 +215,7 @@ class SelectionOptions:
                 and not isinstance(self.misfit_ratio, bool) and self.misfit_ratio >= 0):
             raise DataError(f"identify option selection.misfit_ratio must be a number >= 0 "
                             f"(0: off), found {self.misfit_ratio!r}")
-        for name in ("swaps", "adds"):
+        for name in ("swaps", "adds", "union"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise DataError(f"identify option selection.{name} must be True or False, "
                                 f"found {getattr(self, name)!r}")
@@ -874,6 +880,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
         sel_kw = dict(candidates=cands, direction=direction, margin=opt.selection.margin,
                       start=start or (), swaps="all" if opt.selection.swaps else None,
                       adds=opt.selection.adds, recheck=opt.selection.recheck,
+                      union=opt.selection.union,
                       **_scorer_options(opt))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)

@@ -124,7 +124,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      margin: float = 10.0, screen: str = "grid", progress=None, on_fit=None,
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
                      ahead=None, swaps=None, adds: bool = False, known=None,
-                     final=None, recheck: float | None = RECHECK,
+                     final=None, recheck: float | None = RECHECK, union: bool = False,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -192,6 +192,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     adds : bool
         With ``swaps``: when no swap is made, also try adding one of them, and prune again
         (:func:`~thermctl.structure.search.search_edges`).
+    union : bool
+        With ``adds``: a last backward pass from the selection and every path away from
+        walls whose addition screened below 0
+        (:func:`~thermctl.structure.search.search_edges`).
     known : dict, optional
         Structures fitted already with the same data and model options (another
         selection's :attr:`SelectionResult.trials`); taken instead of fitted again.
@@ -232,7 +236,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     swaps = None if swaps is None else [by_name.get(c.name, c) for c in as_candidates(spec, swaps)]
     res = search_edges(cands, scorer, direction=direction, start=start, max_edges=max_edges,
                        margin=margin, progress=progress, workers=workers, swaps=swaps,
-                       adds=adds, known=known, recheck=recheck)
+                       adds=adds, known=known, recheck=recheck, union=union)
     est, cur = res.fitted, res.edges
     per_edge = per_path_rbar(est) if cur else {}
     net = ThermalNetwork(spec, [x.pair + (x.d,) for x in cur])

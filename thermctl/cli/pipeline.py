@@ -100,6 +100,11 @@ def identify(
                               "swap is made, add the air path (any measured pair) that "
                               "improves BIC by more than --margin with a daily-gain t >= 2, "
                               "then prune again."),
+    union: bool = typer.Option(_D.selection.union, "--union/--no-union",
+                               help="--selection model, whole building, with --adds: a last "
+                               "backward pass from the selection and every path away from "
+                               "walls whose addition screened below 0; kept when its BIC is "
+                               "lower."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
                                   "the backward pass tries again only the air paths whose "
@@ -285,7 +290,7 @@ def identify(
                                    criterion=selection_criterion, margin=margin,
                                    min_t=min_t, predict_t=predict_t,
                                    misfit_ratio=misfit_ratio, swaps=swaps, adds=adds,
-                                   recheck=recheck or None,
+                                   union=union, recheck=recheck or None,
                                    stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
