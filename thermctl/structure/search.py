@@ -581,7 +581,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                  if add_screen[n] < 0 and n not in names and not swap_by_name[n].parallel]
         if not extra:
             return
-        state = (val, list(cur), fitted, dict(reasons), dict(entered), len(path))
+        state = (val, list(cur), fitted, dict(reasons), dict(entered))
         big = cur + extra
         key = frozenset(x.name for x in big)
         if key not in done:
