@@ -463,3 +463,36 @@ def test_a_union_pass_that_ends_no_lower_is_undone():
     assert res.value == pytest.approx(100.0 - 200.0)
     assert res.path[-1].action == "undo" and "no lower than the selection" in res.path[-1].note
     assert "tried as an addition, best screening bic change -5.0" in res.reasons[B.name]
+
+
+class DailyScorer(TableScorer):
+    """A table scorer whose added edges have a daily-gain t by name (default 5)."""
+
+    def __init__(self, single, joint=None, t=None):
+        super().__init__(single, joint)
+        self.t = t or {}
+
+    def consistent(self, small, big):
+        (added,) = {c.name for c in big} - {c.name for c in small}
+        t = self.t.get(added, 5.0)
+        return True, t, f"daily gain t {t:.1f}"
+
+
+def test_a_path_in_by_the_union_must_pass_the_additions_daily_test():
+    # B and C gain 40 together, but C's gain holds on too few days (t 1.0 < 2): C goes, B
+    # alone gains 5 and goes too, and the pass ends where it began
+    single = {A.name: 200.0, B.name: 5.0, C.name: 5.0}
+    joint = {frozenset((A.name, B.name, C.name)): 240.0}
+    sc = DailyScorer(single, joint, t={C.name: 1.0, B.name: 3.0})
+    res = search_edges([A], sc, direction="backward", margin=10.0, swaps=[A, B, C],
+                       adds=True, union=True)
+    assert [c.name for c in res.edges] == [A.name]
+    removed = [st for st in res.path if st.action == "remove"]
+    assert [st.edge for st in removed] == [C.name, B.name]
+    assert "in by the union pass, but its daily gain is not consistent: daily gain t 1.0" \
+        in removed[0].note
+    assert res.path[-1].action == "undo"
+    # both t above 2: the two stay, as without the test
+    res = search_edges([A], DailyScorer(single, joint, t={C.name: 2.5}), direction="backward",
+                       margin=10.0, swaps=[A, B, C], adds=True, union=True)
+    assert sorted(c.name for c in res.edges) == sorted((A.name, B.name, C.name))

@@ -270,7 +270,9 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     union : bool
         With ``adds``: at the end, every path away from walls whose addition screened below
         0 and that was not kept joins the selected ones, and the backward pass prunes them
-        all again; the result stands when its criterion is lower than the selection's.
+        all again; a path in by the union whose daily gain t is below ``swap_t`` goes (the
+        additions' own test), and the result stands when its criterion is lower than the
+        selection's.
         Additions enter one at a time through the margin and the daily test on a rough
         screening; a backward pass judges each path with the others in (open plan, 3R2C
         plant, seed 0: 5/7 true paths and 1 false, the truth 62 better in cold fits; from the
@@ -596,6 +598,30 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                                f"{add_screen[c.name]:+.1f})")
         say(f"union: {note}")
         backward()
+        # a path in by the union passes the additions' own test too: its daily gain t must
+        # reach swap_t (ring, 3R2C plant, seed 0: without it the pass kept n0-n2 and n2-s0,
+        # neither in the plant); the weakest goes first, then the pass prunes again
+        while True:
+            weak = {}
+            for c in cur:
+                if c in extra:
+                    f_without, _ = done[frozenset(x.name for x in cur if x != c)]
+                    _, t, why = holds(f_without, fitted)
+                    if t < swap_t:
+                        weak[c.name] = (t, why)
+            if not weak:
+                break
+            pick = min(weak, key=lambda k: weak[k][0])
+            rest = [x for x in cur if x.name != pick]
+            f2, v2 = done[frozenset(x.name for x in rest)]
+            path.append(SelectionStep("remove", pick, v2, v2 - val, [x.name for x in rest],
+                                      note=f"in by the union pass, but its daily gain is not "
+                                           f"consistent: {weak[pick][1]}"))
+            reasons[pick] = (f"removed: in by the union pass, its daily gain t "
+                             f"{weak[pick][0]:.1f} is below {swap_t:g}")
+            say(f"removed {pick} (union pass, daily gain t {weak[pick][0]:.1f})")
+            cur, fitted, val = rest, f2, v2
+            backward()
         if not val < state[0]:
             kept = {x.name for x in cur}
             val, cur, fitted = state[0], state[1], state[2]
