@@ -159,9 +159,10 @@ class SelectionOptions:
         what they did (docs/identification.md, "Additions"). Default on.
     union : bool
         With ``adds``: a last backward pass from the selection and every path away from
-        walls whose addition screened below 0 (it stands when its BIC is lower). Off by
-        default until measured on the families (docs/identification.md, "Which errors a
-        better search could fix").
+        walls whose addition screened below 0 (it stands when its BIC is lower). On 12 of
+        the 16 broadened family buildings: 46 → 48 of 54 true paths and 6 → 7 false, for
+        up to 80 % more CPU; off by default (docs/identification.md, "Which errors a better
+        search could fix").
     recheck : float or None
         Whole-building fits: after a removal, the backward pass tries again only the air
         paths whose removal cost on an earlier structure of the pass was below ``recheck ×

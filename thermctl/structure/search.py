@@ -275,8 +275,9 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         selection's.
         Additions enter one at a time through the margin and the daily test on a rough
         screening; a backward pass judges each path with the others in (open plan, 3R2C
-        plant, seed 0: 5/7 true paths and 1 false, the truth 62 better in cold fits; from the
-        selection and its 4 such paths, 7/7 and the same false one).
+        plant, seeds 0 and 1: 5/7 → 6/7 and 6/7 → 7/7 true paths, the truth 62 and 22
+        better in cold fits; but the finite-volume plant's seed 0 gains a false path, and
+        CPU grows by up to 80 %: off by default, docs/identification.md).
     known : dict, optional
         Structures fitted already by a scorer of the same data and model options (another
         search's :attr:`SearchResult.trials`): frozenset of edge names → ``(fit,
