@@ -465,7 +465,7 @@ def test_a_union_pass_that_ends_no_lower_is_undone():
     assert "tried as an addition, best screening bic change -5.0" in res.reasons[B.name]
 
 
-class DailyScorer(TableScorer):
+class AddedEdgeScorer(TableScorer):
     """A table scorer whose added edges have a daily-gain t by name (default 5)."""
 
     def __init__(self, single, joint=None, t=None):
@@ -483,7 +483,7 @@ def test_a_path_in_by_the_union_must_pass_the_additions_daily_test():
     # alone gains 5 and goes too, and the pass ends where it began
     single = {A.name: 200.0, B.name: 5.0, C.name: 5.0}
     joint = {frozenset((A.name, B.name, C.name)): 240.0}
-    sc = DailyScorer(single, joint, t={C.name: 1.0, B.name: 3.0})
+    sc = AddedEdgeScorer(single, joint, t={C.name: 1.0, B.name: 3.0})
     res = search_edges([A], sc, direction="backward", margin=10.0, swaps=[A, B, C],
                        adds=True, union=True)
     assert [c.name for c in res.edges] == [A.name]
@@ -493,6 +493,7 @@ def test_a_path_in_by_the_union_must_pass_the_additions_daily_test():
         in removed[0].note
     assert res.path[-1].action == "undo"
     # both t above 2: the two stay, as without the test
-    res = search_edges([A], DailyScorer(single, joint, t={C.name: 2.5}), direction="backward",
-                       margin=10.0, swaps=[A, B, C], adds=True, union=True)
+    res = search_edges([A], AddedEdgeScorer(single, joint, t={C.name: 2.5}),
+                       direction="backward", margin=10.0, swaps=[A, B, C], adds=True,
+                       union=True)
     assert sorted(c.name for c in res.edges) == sorted((A.name, B.name, C.name))
