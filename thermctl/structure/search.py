@@ -276,8 +276,9 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         Additions enter one at a time through the margin and the daily test on a rough
         screening; a backward pass judges each path with the others in (open plan, 3R2C
         plant, seeds 0 and 1: 5/7 → 6/7 and 6/7 → 7/7 true paths, the truth 62 and 22
-        better in cold fits; but the finite-volume plant's seed 0 gains a false path, and
-        CPU grows by up to 80 %: off by default, docs/identification.md).
+        better in cold fits; but the finite-volume plant's seed 0 and an L-shape gain a
+        false path each, and CPU grows by up to 80 %: off by default,
+        docs/identification.md).
     known : dict, optional
         Structures fitted already by a scorer of the same data and model options (another
         search's :attr:`SearchResult.trials`): frozenset of edge names → ``(fit,
