@@ -159,8 +159,8 @@ class SelectionOptions:
         what they did (docs/identification.md, "Additions"). Default on.
     union : bool
         With ``adds``: a last backward pass from the selection and every path away from
-        walls whose addition screened below 0 (it stands when its BIC is lower). On 14 of
-        the 16 broadened family buildings: 53 → 55 of 61 true paths and 7 → 9 false, for
+        walls whose addition screened below 0 (it stands when its BIC is lower). On 15 of
+        the 16 broadened family buildings: 56 → 58 of 64 true paths and 8 → 10 false, for
         up to 80 % more CPU; off by default (docs/identification.md, "Which errors a better
         search could fix").
     recheck : float or None
