@@ -228,7 +228,7 @@ def family_errors(cases=None):
             warnings.simplefilter("ignore")
             meas, true = data("_family", {"_seed": r["seed"]}, False)
             # a path to a hidden zone is in the plant, not in what a model can select
-            if sorted(true) != sorted(T + [tuple(sorted(p)) for p in r["hidden_true"]]):
+            if sorted(true) != sorted(T + [tuple(sorted(p)) for p in r.get("hidden_true", [])]):
                 raise SystemExit(f"{r['case']} seed {r['seed']}: the building generated now "
                                  f"has other true paths than the row ({true} against {T})")
             sc = selection_scorer(meas)
