@@ -576,7 +576,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         say(f"added {c.name} ({crit} {d:+.1f}{', ' + why if why else ''})")
         return True
 
-    def _union_pass():
+    def union_pass():
         """Backward again from the selection and every path away from walls whose addition
         screened below 0; kept when it ends lower."""
         nonlocal cur, fitted, val
@@ -681,7 +681,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 say("undo: the additions grew the model by a path beside a wall")
                 backward()
             if union and adds:
-                _union_pass()
+                union_pass()
             # the alternatives a swap tried join the candidates (with why they are out)
             for name in sorted(set(swap_screen) | set(add_screen)):
                 if name not in by_name:
