@@ -863,3 +863,57 @@ def test_scorer_lets_its_start_converge_and_caps_the_trials_warm_from_it(sim5, n
     capped, v_capped = LikelihoodScorer(net5.spec, data, max_iter=3, start_iter=3,
                                         options=opts).fit([c])
     assert v_capped > v_start + 1.0
+
+
+# ---------------------------------------------------------------------------- stall rule
+class _QuarticProblem:
+    """f(η) = 10⁶ Σ η⁴ on [-5, 10]: L-BFGS-B converges on it only linearly (the curvature
+    vanishes at the optimum), the crawl the stall rule is for; ``gtol`` (1e-7) holds it
+    until |η| ≈ 3e-5."""
+
+    n_obs = 1
+
+    def __init__(self, n=3):
+        from types import SimpleNamespace
+        p = SimpleNamespace(group="rbar_v", log=False, fixed=False)
+        self.layout = SimpleNamespace(params=[p] * n, bounds=lambda: (np.full(n, -5.0),
+                                                                         np.full(n, 10.0)),
+                                      eta0=lambda: np.linspace(4.0, 9.0, n),
+                                      free=lambda: np.ones(n, dtype=bool))
+        self.values = []
+
+    def nll_grad(self, eta):
+        self.values.append(1e6 * float(np.sum(eta ** 4)))
+        return self.values[-1], 4e6 * eta ** 3
+
+
+def test_stall_rule_stops_a_crawl_within_its_gain():
+    from thermctl.estimate.likelihood.optimize import minimize_criterion
+
+    full_pb, stall_pb = _QuarticProblem(), _QuarticProblem()
+    full = minimize_criterion(full_pb, max_iter=1000, tol=1e-15)
+    stalled = minimize_criterion(stall_pb, max_iter=1000, tol=1e-15, stall=(20, 0.05))
+    assert stalled.success and stalled.message.startswith("stalled")
+    assert stalled.n_eval < full.n_eval
+    # the rule: the best value 20 evaluations before the stop was less than 0.05 above
+    # the best at the stop ...
+    best = np.minimum.accumulate(stall_pb.values)
+    assert best[-21] - best[-1] < 0.05 <= best[-22] - best[-2]
+    assert stalled.value == pytest.approx(best[-1])
+    # ... and on a linear crawl what is left is less than that
+    assert stalled.value - full.value < 0.05
+
+
+def test_scorer_fits_stop_on_the_stall_rule(sim5, net5):
+    from thermctl.estimate.likelihood.optimize import STALL
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+
+    data, opts = sim5
+    (c,) = [c for c in candidate_pairs(net5.spec) if {c.a, c.b} == {"r2", "r3"}]
+    est, v = LikelihoodScorer(net5.spec, data, options=opts).fit([c])
+    assert est.stall == STALL
+    full, v_full = LikelihoodScorer(net5.spec, data, stall=None, options=opts).fit([c])
+    assert full.stall is None
+    # the 5-room fit converges before 20 evaluations gain less than 0.05 nats: the same
+    # optimum with and without the rule
+    assert v == pytest.approx(v_full, abs=0.1)

@@ -143,6 +143,10 @@ class LikelihoodEstimator:
     max_iter : int
     tol : float
         Tolerance on the criterion per observation (L-BFGS-B ``ftol``, IPOPT ``tol``) [-].
+    stall : (int, float), optional
+        L-BFGS-B stops once the criterion has gained less than ``stall[1]`` (nats) over
+        the last ``stall[0]`` evaluations (a search's fits use
+        :data:`~thermctl.estimate.likelihood.optimize.STALL`). Default: no such stop.
     options : LikelihoodOptions, optional
         Model and criterion options; keyword arguments below override its fields.
     **kwargs
@@ -181,7 +185,7 @@ class LikelihoodEstimator:
     def __init__(self, network: ThermalNetwork, criterion: str = "likelihood", *,
                  rbar_v=RBAR_V_PAPER, c_v=None, solver: str = "lbfgs", rbar_starts=None,
                  fix: dict | None = None, max_iter: int = 300, tol: float = 1e-9,
-                 options: LikelihoodOptions | None = None,
+                 stall: tuple | None = None, options: LikelihoodOptions | None = None,
                  **kwargs):
         self.network = network
         self.criterion = criterion
@@ -192,6 +196,7 @@ class LikelihoodEstimator:
         self.fix = fix
         self.max_iter = max_iter
         self.tol = tol
+        self.stall = stall
         self.options = options
         self.kwargs = kwargs
 
@@ -249,7 +254,8 @@ class LikelihoodEstimator:
                                                              lay.params[i].upper)))
                 with record_warnings() as caught:
                     res = minimize_criterion(pb, self.criterion, eta0, solver=self.solver,
-                                             max_iter=self.max_iter, tol=self.tol)
+                                             max_iter=self.max_iter, tol=self.tol,
+                                             stall=self.stall)
                 tried.append(({"rbar_v": r0}, res.value))
                 if best is None or res.value < best[0].value:
                     best = (res, caught)

@@ -24,7 +24,7 @@ from scipy.optimize import minimize
 
 from ...errors import ConvergenceWarning, EstimationError
 
-__all__ = ["OptResult", "minimize_criterion", "CRITERIA", "SOLVERS"]
+__all__ = ["OptResult", "minimize_criterion", "CRITERIA", "SOLVERS", "STALL"]
 
 log = logging.getLogger(__name__)
 
@@ -68,8 +68,8 @@ def _scale(problem, criterion):
 
 
 def minimize_criterion(problem, criterion: str = "likelihood", eta0=None, *, solver: str = "lbfgs",
-                       max_iter: int = 300, tol: float = 1e-9, free=None, hessian: str = "limited-memory"
-                       ) -> OptResult:
+                       max_iter: int = 300, tol: float = 1e-9, free=None, hessian: str = "limited-memory",
+                       stall: tuple | None = None) -> OptResult:
     """Minimise the criterion from ``eta0`` within the layout's bounds.
 
     Parameters
@@ -87,6 +87,10 @@ def minimize_criterion(problem, criterion: str = "likelihood", eta0=None, *, sol
         at ``eta0``.
     hessian : {"limited-memory", "exact"}
         IPOPT only.
+    stall : (int, float), optional
+        L-BFGS-B only: ``(k, gain)`` stops the run, as converged, once the best criterion
+        value has improved by less than ``gain`` (unscaled: nats, or K²) over the last ``k``
+        evaluations (:data:`STALL` for a search's trial fits). Default: no such stop.
     """
     if criterion not in CRITERIA:
         raise EstimationError(f"criterion must be one of {CRITERIA}, found {criterion!r}")
@@ -100,7 +104,7 @@ def minimize_criterion(problem, criterion: str = "likelihood", eta0=None, *, sol
     s = _scale(problem, criterion)
     t0 = time.perf_counter()
     if solver == "lbfgs":
-        res = _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol)
+        res = _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol, stall)
     else:
         res = _ipopt(problem, criterion, eta0, free, lo, hi, s, max_iter, tol, hessian)
     res.time = time.perf_counter() - t0
@@ -128,6 +132,19 @@ one its start leads to. The fitted model and the intervals are in ``eta`` as bef
 """
 
 
+STALL = (20, 0.05)
+"""``(k, gain)``: a search's fit stops once its best value has gained less than ``gain``
+nats over its last ``k`` likelihood evaluations (``minimize_criterion(stall=)``).
+
+Why: L-BFGS-B's own tests (``ftol`` 1e-9 on the criterion per observation, ``gtol``) hold
+on until a noise intensity that the data do not need has crept to its bound, a few
+hundredths of a nat per iteration. On the twin house N2 the 45 fits of a default selection
+made 3 916 evaluations; replayed on their traces, this rule stops them after 17 % fewer,
+each within 0.95 nats of where L-BFGS-B stopped (session 32), against BIC margins of 10
+(5 nats) and decisions that differ by hundreds of nats there.
+"""
+
+
 def _noise_coords(problem, idx):
     """Which of the coordinates ``idx`` L-BFGS-B moves by :data:`NOISE_STEP`."""
     if NOISE_STEP != "asinh":
@@ -136,10 +153,12 @@ def _noise_coords(problem, idx):
     return np.array([ps[i].group in NOISE_GROUPS and ps[i].log for i in idx], dtype=bool)
 
 
-def _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol):
+def _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol, stall=None):
     fg = problem.nll_grad if criterion == "likelihood" else problem.kstep_grad
     idx = np.flatnonzero(free)
     n_eval = [0]
+    best = []                        # best unscaled value after each evaluation
+    stalled = [False]
     nz = _noise_coords(problem, idx)
     c = np.exp(eta0[idx][nz])        # σ0: z = asinh(σ/σ0), σ = σ0·sinh(z)
 
@@ -164,6 +183,7 @@ def _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol):
             return np.inf, np.zeros(len(idx))
         if not np.isfinite(f) or not np.all(np.isfinite(g)):
             return np.inf, np.zeros(len(idx))
+        best.append(min(f, best[-1]) if best else f)
         g = g[idx] * s
         g[nz] = g[nz] / np.tanh(z[nz])
         return f * s, g
@@ -173,13 +193,22 @@ def _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol):
         return OptResult(eta0, f, True, "nothing to optimise", 0, 1, 0.0, "lbfgs")
     zlo, zhi = to_z(lo[idx]), to_z(hi[idx])
     z0 = np.clip(to_z(eta0[idx]), zlo, zhi)
+
+    def check(intermediate_result):  # once per iteration (scipy's callback protocol)
+        k, gain = stall
+        if len(best) > k and best[-k - 1] - best[-1] < gain:
+            stalled[0] = True
+            raise StopIteration
+
     r = minimize(fun, z0, jac=True, method="L-BFGS-B",
-                 bounds=list(zip(zlo, zhi)),
+                 bounds=list(zip(zlo, zhi)), callback=None if stall is None else check,
                  options={"maxiter": max_iter, "ftol": tol, "gtol": 1e-7, "maxcor": 20})
     eta = eta0.copy()
     eta[idx] = np.clip(to_eta(r.x), lo[idx], hi[idx])
-    ok = bool(r.success) or "REL_REDUCTION" in str(r.message).upper()
-    return OptResult(eta, float(r.fun) / s, ok, str(r.message), int(r.nit), n_eval[0], 0.0, "lbfgs")
+    ok = bool(r.success) or "REL_REDUCTION" in str(r.message).upper() or stalled[0]
+    msg = (f"stalled: gained less than {stall[1]:g} over the last {stall[0]} evaluations"
+           if stalled[0] else str(r.message))
+    return OptResult(eta, float(r.fun) / s, ok, msg, int(r.nit), n_eval[0], 0.0, "lbfgs")
 
 
 def _ipopt(problem, criterion, eta0, free, lo, hi, s, max_iter, tol, hessian):

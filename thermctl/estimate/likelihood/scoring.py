@@ -25,6 +25,7 @@ from ..bounds import RBAR_BOUNDS
 from ..data import as_estimation_data
 from .estimator import LikelihoodEstimator
 from .kstep import kstep_block_mse
+from .optimize import STALL
 
 __all__ = ["LikelihoodScorer", "CRITERIA", "SCREENS"]
 
@@ -73,6 +74,10 @@ class LikelihoodScorer:
         (C_v 6840 → 3080 J/K) and its R̄_v interval [2.69e-4, 3.29e-4] no longer held the
         truth 3.36e-4 ([2.62e-4, 3.38e-4] at 1e-9): kept at 1e-9 until the final fit no
         longer depends on where the selection stopped.
+    stall : (int, float) or None
+        A fit stops once it has gained less than ``stall[1]`` nats over its last
+        ``stall[0]`` likelihood evaluations (:data:`~thermctl.estimate.likelihood.optimize.STALL`);
+        None: L-BFGS-B's own tests only.
     on_fit : callable, optional
         ``on_fit(n)`` after each full fit (``n`` so far): a heartbeat for long searches.
     min_t : float
@@ -97,7 +102,7 @@ class LikelihoodScorer:
 
     def __init__(self, spec, data, criterion: str = "bic", holdout: float = 0.3,
                  screen: str = "grid", max_iter: int = 200, start_iter: int = 1000,
-                 tol: float = 1e-9, on_fit=None,
+                 tol: float = 1e-9, stall=STALL, on_fit=None,
                  min_t: float = 0.0, block: float = 86400.0, predict_t: float | None = None,
                  predict_horizon: float = 6 * 3600.0, **estimator_kwargs):
         if criterion not in CRITERIA:
@@ -112,6 +117,7 @@ class LikelihoodScorer:
         self.max_iter = max_iter
         self.start_iter = start_iter
         self.tol = tol
+        self.stall = None if stall is None else tuple(stall)
         self.on_fit = on_fit
         self.min_t = float(min_t)
         self.block = float(block)
@@ -180,7 +186,8 @@ class LikelihoodScorer:
         """Take the fits ``other`` started ahead (:meth:`speculate`); ``other`` must ask the
         same questions of the same data (options, criterion, rows), else EstimationError."""
         same = (other.kw == self.kw and other.criterion == self.criterion
-                and other.tol == self.tol and other.max_iter == self.max_iter
+                and other.tol == self.tol and other.stall == self.stall
+                and other.max_iter == self.max_iter
                 and other.start_iter == self.start_iter
                 and _same_data(other.train, self.train))
         if not same:
@@ -360,7 +367,7 @@ class LikelihoodScorer:
         if max_iter is None:
             max_iter = self.start_iter if init is None and fix is None else self.max_iter
         est = LikelihoodEstimator(net, per_edge=True, fix=fix, tol=self.tol,
-                                  max_iter=max_iter, **self.kw)
+                                  max_iter=max_iter, stall=self.stall, **self.kw)
         if stop is not None:
             est.make_problem = _stoppable(est.make_problem, stop)
         with ignore_warnings(BoundWarning, ConvergenceWarning):
