@@ -51,6 +51,13 @@ def test_profiles_in_threads_equal_serial(floor):
         a, b = reps[0].intervals[name], reps[1].intervals[name]
         assert a.method == b.method == "profile"
         assert (a.lower, a.upper) == pytest.approx((b.lower, b.upper), rel=1e-12)
+        # the sides of each profile run as tasks of their own: the same interval as the
+        # public one-parameter profile, both sides in turn
+        from thermctl.estimate.likelihood.uncertainty import profile_likelihood
+        c = profile_likelihood(est.problem_, est.eta_, name, nll_hat=est.nll_,
+                               inflation=reps[1].wald[name].inflation)
+        assert (c.lower, c.upper, c.closed_lower, c.closed_upper) == pytest.approx(
+            (b.lower, b.upper, b.closed_lower, b.closed_upper), rel=1e-12)
     assert reps[0].verdicts == reps[1].verdicts
     # the Wald step: Hessian columns and day-block scores side by side
     for name, a in reps[0].wald.items():
