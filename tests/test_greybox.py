@@ -917,3 +917,46 @@ def test_scorer_fits_stop_on_the_stall_rule(sim5, net5):
     # the 5-room fit converges before 20 evaluations gain less than 0.05 nats: the same
     # optimum with and without the rule
     assert v == pytest.approx(v_full, abs=0.1)
+
+
+# ---------------------------------------------------------------------------- best-day test
+def _table_scorer(g, best_day=10.0, min_t=0.0):
+    """A LikelihoodScorer whose daily gains are ``g`` and whose criterion of an estimator is
+    the estimator itself (a number): :meth:`consistent` with nothing fitted."""
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+
+    sc = LikelihoodScorer.__new__(LikelihoodScorer)
+    sc.test, sc.min_t, sc.best_day, sc.predict_t, sc.name = None, min_t, best_day, None, "bic"
+    sc._daily_gains = lambda small, big: np.asarray(g, dtype=float)
+    sc.value = lambda est: est
+    return sc
+
+
+def test_best_day_test_asks_the_margin_without_the_best_day():
+    # gains 24 nats in all, the penalty 10: removing the path costs 2·24 − 10 = 38 of BIC
+    lumpy = _table_scorer([20.0, 1.0, 1.0, 1.0, 1.0])
+    ok, t, note = lumpy.consistent(38.0, 0.0)
+    assert not ok                                   # 38 − 2·20 = −2 < 10
+    assert "without its best day bic -2.0 (needs 10)" in note
+    even = _table_scorer([5.0, 5.0, 5.0, 5.0, 4.0])
+    ok, t, note = even.consistent(38.0, 0.0)
+    assert ok and "without its best day bic +28.0" in note      # 38 − 2·5
+    # off: the same lumpy path holds (the day-by-day t alone is not asked either)
+    assert _table_scorer([20.0, 1.0, 1.0, 1.0, 1.0], best_day=None).consistent(38.0, 0.0)[0]
+
+
+def test_best_day_test_on_a_fitted_path(sim5, net5):
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+
+    data, opts = sim5
+    (c,) = [c for c in candidate_pairs(net5.spec) if {c.a, c.b} == {"r2", "r3"}]
+    sc = LikelihoodScorer(net5.spec, data, best_day=10.0, options=opts)
+    big, v_big = sc.fit([c])
+    small, v_small = sc.fit([], warm=big)
+    ok, t, note = sc.consistent(small, big)
+    g = sc._daily_gains(small, big)
+    # the true r2-r3 (200 W/K) gains on each of the 4 days: it clears the margin without
+    # the best one, by the criterion's own numbers
+    out = v_small - v_big - 2.0 * g.max()
+    assert ok and out > 10.0
+    assert f"without its best day bic {out:+.1f}" in note
