@@ -308,8 +308,6 @@ def main(argv=None):
                          "shows them as the default)")
     ap.add_argument("--union", action="store_true",
                     help="identify's --union (case names get ' [union]')")
-    ap.add_argument("--best-day", action="store_true",
-                    help="identify's --best-day (case names get ' [best day]')")
     ap.add_argument("--per-edge", action="store_true",
                     help="identify's --per-edge (case names get ' [per edge]')")
     ap.add_argument("--shared-rbar", action="store_true",
@@ -413,9 +411,6 @@ def main(argv=None):
         if args.union:
             sel["union"] = True
             name += " [union]"
-        if args.best_day:
-            sel["best_day"] = True
-            name += " [best day]"
         if args.recheck is not None:
             sel["recheck"] = args.recheck or None
             name += f" [recheck {args.recheck:g}]"

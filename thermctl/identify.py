@@ -163,11 +163,6 @@ class SelectionOptions:
         the 16 broadened family buildings: 56 → 58 of 64 true paths and 8 → 10 false, for
         up to 80 % more CPU; off by default (docs/identification.md, "Which errors a better
         search could fix").
-    best_day : bool
-        Whole-building selection: a kept air path must also clear ``margin`` with its best
-        day's likelihood gain taken out (``LikelihoodScorer(best_day=margin)``): a path that
-        stands in for one day's disturbance gains mostly on that day (docs/identification.md,
-        "A path that lives on one day"). Off by default.
     recheck : float or None
         Whole-building fits: after a removal, the backward pass tries again only the air
         paths whose removal cost on an earlier structure of the pass was below ``recheck ×
@@ -201,7 +196,6 @@ class SelectionOptions:
     swaps: bool = True
     adds: bool = True
     union: bool = False
-    best_day: bool = False
     recheck: float | None = RECHECK
     stability: int = 0
     stability_threshold: float = 0.6
@@ -222,7 +216,7 @@ class SelectionOptions:
                 and not isinstance(self.misfit_ratio, bool) and self.misfit_ratio >= 0):
             raise DataError(f"identify option selection.misfit_ratio must be a number >= 0 "
                             f"(0: off), found {self.misfit_ratio!r}")
-        for name in ("swaps", "adds", "union", "best_day"):
+        for name in ("swaps", "adds", "union"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise DataError(f"identify option selection.{name} must be True or False, "
                                 f"found {getattr(self, name)!r}")
@@ -1322,7 +1316,6 @@ def _scorer_options(opt) -> dict:
     solar term, model options)."""
     return dict(criterion=opt.selection.criterion, min_t=opt.selection.min_t,
                 predict_t=opt.selection.predict_t, solar=opt.estimation.solar,
-                best_day=opt.selection.margin if opt.selection.best_day else None,
                 **_mass_options(opt))
 
 

@@ -125,7 +125,6 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
                      ahead=None, swaps=None, adds: bool = False, known=None,
                      final=None, recheck: float | None = RECHECK, union: bool = False,
-                     best_day: float | None = None,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -228,7 +227,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     by_name = {c.name: c for c in cands}
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
                               max_iter=max_iter, on_fit=on_fit, min_t=min_t,
-                              best_day=best_day, predict_t=predict_t, **estimator_kwargs)
+                              predict_t=predict_t, **estimator_kwargs)
     if ahead is not None:
         scorer.adopt(ahead)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]

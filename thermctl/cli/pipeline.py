@@ -105,10 +105,6 @@ def identify(
                                "backward pass from the selection and every path away from "
                                "walls whose addition screened below 0; kept when its BIC is "
                                "lower."),
-    best_day: bool = typer.Option(_D.selection.best_day, "--best-day/--no-best-day",
-                                  help="--selection model, whole building: a kept air path "
-                                  "must still improve BIC by more than --margin with its best "
-                                  "day's likelihood gain taken out."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
                                   "the backward pass tries again only the air paths whose "
@@ -294,8 +290,7 @@ def identify(
                                    criterion=selection_criterion, margin=margin,
                                    min_t=min_t, predict_t=predict_t,
                                    misfit_ratio=misfit_ratio, swaps=swaps, adds=adds,
-                                   union=union, best_day=best_day,
-                                   recheck=recheck or None,
+                                   union=union, recheck=recheck or None,
                                    stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,

@@ -85,9 +85,6 @@ class LikelihoodScorer:
         its daily likelihood gains [-]; 0: reported, not required.
     block : float
         Length of the blocks of that test [s] (a day: the gains' own period).
-    best_day : float or None
-        A margin an air path's criterion gain must still clear with the gain of its best
-        block (day) taken out (:meth:`consistent`); None: not asked.
     predict_t : float or None
         Consistency an air path must show in prediction: the t statistic of its daily
         reduction of the ``predict_horizon``-ahead prediction error (:meth:`consistent`)
@@ -106,8 +103,7 @@ class LikelihoodScorer:
     def __init__(self, spec, data, criterion: str = "bic", holdout: float = 0.3,
                  screen: str = "grid", max_iter: int = 200, start_iter: int = 1000,
                  tol: float = 1e-9, stall=STALL, on_fit=None,
-                 min_t: float = 0.0, block: float = 86400.0, best_day: float | None = None,
-                 predict_t: float | None = None,
+                 min_t: float = 0.0, block: float = 86400.0, predict_t: float | None = None,
                  predict_horizon: float = 6 * 3600.0, **estimator_kwargs):
         if criterion not in CRITERIA:
             raise EstimationError(f"criterion must be one of {CRITERIA}, found {criterion!r}")
@@ -125,7 +121,6 @@ class LikelihoodScorer:
         self.on_fit = on_fit
         self.min_t = float(min_t)
         self.block = float(block)
-        self.best_day = None if best_day is None else float(best_day)
         self.predict_t = None if predict_t is None else float(predict_t)
         self.predict_horizon = float(predict_horizon)
         self.n_fits = 0
@@ -192,7 +187,6 @@ class LikelihoodScorer:
         same questions of the same data (options, criterion, rows), else EstimationError."""
         same = (other.kw == self.kw and other.criterion == self.criterion
                 and other.tol == self.tol and other.stall == self.stall
-                and other.best_day == self.best_day
                 and other.max_iter == self.max_iter
                 and other.start_iter == self.start_iter
                 and _same_data(other.train, self.train))
@@ -252,12 +246,6 @@ class LikelihoodScorer:
         score statistic: ``min_t = 2`` asks for ``|Z| ≥ 4`` (~3 × 10⁻³ with a t
         distribution on 9 days), while a true path gains on nearly every day.
 
-        With ``best_day`` the path's criterion gain must also clear that margin with its
-        best day's gain taken out: a path that is not in the plant but stands in for a
-        disturbance of one day gains mostly on that day (in the broadened family 64–74 % of
-        the gain of the false paths a0–b0 and n2–s0 came from one of 12 days, 21–45 % for the
-        true paths beside them), a leave-one-block-out check of the evidence.
-
         With ``predict_t`` the path must also predict better day after day: ``g_d`` is then
         the reduction of day d's mean squared ``predict_horizon``-ahead prediction error
         (from filtered states, :func:`~thermctl.estimate.likelihood.kstep.kstep_block_mse`),
@@ -285,13 +273,6 @@ class LikelihoodScorer:
         g = self._daily_gains(small, big)
         t, note = _day_t(g, self.min_t, "daily gain")
         ok = self.min_t <= 0 or not t < self.min_t
-        if self.best_day is not None and len(g) >= 4:
-            # the criterion's gain is 2 Σ g_d less the penalty: without the best day it is
-            # that less 2 max g_d
-            out = self.value(small) - self.value(big) - 2.0 * max(float(np.max(g)), 0.0)
-            note += f"; without its best day {self.name} {out:+.1f} (needs {self.best_day:g})"
-            if ok and out < self.best_day:
-                ok = False
         if self.predict_t is not None:
             gk = self._daily_prediction_gains(small, big)
             tk, note_k = _day_t(gk, self.predict_t, f"{self.predict_horizon / 3600:g}-h prediction")
