@@ -344,7 +344,9 @@ def main(argv=None):
                "session 21 in family-runs.jsonl. Since session 22 the search also tries "
                "additions (--adds; a path beside a wall only in place of another): the "
                "factors and the first family were re-run, and the family rows that say "
-               "session 22 (the finite-volume l-shape seed 1: session 23). "
+               "session 22 (the finite-volume l-shape seed 1: session 23). Since session 34 "
+               "the search's fits stop once 20 evaluations gain less than 0.05 nats (the "
+               "first and the broadened family were re-run; the factor study was not). "
                "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]
