@@ -252,3 +252,48 @@ def test_scale_pooled_lines_sum_over_seeds():
     assert "recall 71/108 = 0.66, 33 false = 0.84 per 10 zones" in lines[2]
     # (330 + 270)/2 / 75 = 4.00; (170 + 150)/2 / 38 = 4.21
     assert "×4.00 CPU, ×4.21 wall of 49 zones for ×4.00 the zones" in lines[2]
+
+
+def _load(name):
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_phases_split_a_run_at_its_progress_lines():
+    ph = _load("phases")
+    lines = [(1.5, "identify: input timing 0/2, elapsed 0:00"),
+             (12.0, "identify: input timing 2/2, elapsed 0:11, done"),
+             (12.0, "identify: structure 0/1, elapsed 0:00"),
+             (12.01, "identify: structure 1/1, elapsed 0:00, done"),
+             (12.01, "identify: gain model 0/2, elapsed 0:00"),
+             (20.0, "identify: gain model 2/2, elapsed 0:08, done"),
+             (38.0, "identify: selection fits (9 candidates) 1, elapsed 0:00"),
+             (90.0, "identify: selection fits (9 candidates) 44, elapsed 1:22"),
+             (95.0, "wrote out/model.json and out/identification.json (94.0 s)")]
+    rows = ph.phases(lines, 96.0)
+    assert [(a, b, n) for a, b, n in rows] == [
+        (0.0, 1.5, "reading the data"), (1.5, 12.0, "input timing"),
+        (12.01, 20.0, "gain model"), (20.0, 38.0, "the selection's first fit (alone)"),
+        (38.0, 95.0, "selection fits (9 candidates)"), (95.0, 96.0, "tables, figures, exit")]
+    # CPU between samples is linear in time; after the last sample it stays
+    samples = [(0.0, 0.0), (10.0, 20.0), (20.0, 30.0)]
+    assert ph.interp(samples, 5.0) == pytest.approx(10.0)
+    assert ph.interp(samples, 15.0) == pytest.approx(25.0)
+    assert ph.interp(samples, 25.0) == pytest.approx(30.0)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="Linux /proc only")
+def test_phases_reads_a_process_cpu_time():
+    import os
+    import time
+    ph = _load("phases")
+    c0, t0 = ph._cpu_seconds(os.getpid()), time.process_time()
+    x = 0.0
+    while time.process_time() - t0 < 0.3:        # busy for 0.3 s of CPU
+        x += 1.0
+    c1 = ph._cpu_seconds(os.getpid())
+    assert c1 - c0 == pytest.approx(time.process_time() - t0, abs=0.05)
+    assert ph._cpu_seconds(2 ** 22 + 12345) is None      # no such process
