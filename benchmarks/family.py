@@ -346,7 +346,7 @@ def main(argv=None):
                "factors and the first family were re-run, and the family rows that say "
                "session 22 (the finite-volume l-shape seed 1: session 23). Since session 34 "
                "the search's fits stop once 20 evaluations gain less than 0.05 nats (the "
-               "first and the broadened family were re-run; the factor study was not). "
+               "factor study and both families were re-run). "
                "A per-path model's R̄v "
                "is the geometric mean of its paths' values; it covers when every true "
                "path's interval does.", ""]
