@@ -30,6 +30,8 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "twinhouse-n2"
 _PROGRESS = re.compile(r"^identify: (?P<stage>.*?) (?P<n>\d+)(/\d+)?, elapsed [\d:]+(?P<done>, done)?")
 
@@ -95,11 +97,9 @@ def phases(lines, wall):
 
 
 def interp(samples, t):
-    """CPU at time ``t`` by linear interpolation of the samples [s]."""
-    for (t1, c1), (t2, c2) in zip(samples, samples[1:]):
-        if t1 <= t <= t2:
-            return c1 + (c2 - c1) * (t - t1) / max(t2 - t1, 1e-9)
-    return samples[-1][1]
+    """CPU at time ``t`` by linear interpolation of the samples (the last one after them) [s]."""
+    ts, cs = zip(*samples)
+    return float(np.interp(t, ts, cs))
 
 
 def main(argv=None):

@@ -587,10 +587,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             return
         state = (val, list(cur), fitted, dict(reasons), dict(entered))
         big = cur + extra
-        key = frozenset(x.name for x in big)
-        if key not in done:
-            done[key] = scorer.fit(big, warm=fitted)
-        cur, (fitted, val) = big, done[key]
+        fit_missing([big])
+        cur, (fitted, val) = big, done[frozenset(x.name for x in big)]
         note = (f"{len(extra)} path(s) whose addition screened below 0 joined the "
                 f"{len(names)} selected: {', '.join(c.name for c in extra)}")
         path.append(SelectionStep("union", None, val, val - state[0], [x.name for x in cur],
