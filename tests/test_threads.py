@@ -151,3 +151,42 @@ def test_swap_stage_in_threads_equals_serial(floor):
     tried = {k: v for k, v in s1.reasons.items() if "tried in place" in v}
     assert tried and tried == {k: s2.reasons[k] for k in tried}
     assert s1.n_fits == s2.n_fits
+
+
+@pytest.mark.parametrize("gains, kept", [("hourly", True), ("arrivals", False)])
+def test_first_fit_beside_the_gain_decision_follows_the_decision(gains, kept, caplog):
+    """``identify`` fits the search's first structure beside the gain-model decision, without
+    the fast gain until the decision's running fit is better by more than the margin, then
+    with it. Either way the fit handed to the search has the decided gain model and is the
+    fit the search would have made (hourly occupancy, seed 1: kept, BIC −270; the default
+    testbed: left out, +17.5)."""
+    import logging
+
+    from thermctl.data import read_measurements
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+    from thermctl.identify import IdentifyOptions, _gain_model_and_first_fit, _scorer_options
+    from thermctl.structure.search import as_candidates
+    from thermctl.testbed import generate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate("pugh-hall", days=14, seed=1, gains=gains)
+        meas = read_measurements(tb.data, tb.spec, name=gains)
+    cal, _ = meas.split()
+    first = [e[:2] for e in tb.truth.edges]
+    opt = IdentifyOptions()
+    opt.split.workers = 2
+    notes = []
+    with caplog.at_level(logging.INFO, logger="thermctl.identify"):
+        got, ahead = _gain_model_and_first_fit(tb.spec, cal, opt, notes, None, first)
+    assert got.estimation.fast_gain is kept
+    switched = [r for r in caplog.records if "beside it now has it" in r.getMessage()]
+    assert len(switched) == (1 if kept else 0)
+    # the fit started ahead is the search's own cold fit of that structure, with the
+    # decided gain model
+    ref = LikelihoodScorer(tb.spec, cal, **_scorer_options(got))
+    assert ahead is not None and ahead.kw == ref.kw
+    fut = ahead._ahead[frozenset(c.name for c in as_candidates(tb.spec, first))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est, val = ref.fit(as_candidates(tb.spec, first))
+    assert fut.result()[1] == pytest.approx(val, rel=1e-12)

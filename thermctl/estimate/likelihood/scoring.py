@@ -8,6 +8,7 @@ ranks the candidates it could add cheaply (:meth:`LikelihoodScorer.screen`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -17,7 +18,7 @@ import numpy as np
 from scipy.stats import binomtest, gmean
 
 from ..._blas import ignore_warnings, single_thread_blas
-from ..._parallel import thread_map
+from ..._parallel import ThreadPool, thread_map
 from ...errors import BoundWarning, ConvergenceWarning, EstimationError
 from ...model import ConvectionParameters
 from ...network import ThermalNetwork
@@ -27,7 +28,7 @@ from .estimator import LikelihoodEstimator
 from .kstep import kstep_block_mse
 from .optimize import STALL
 
-__all__ = ["LikelihoodScorer", "CRITERIA", "SCREENS"]
+__all__ = ["LikelihoodScorer", "FitPool", "CRITERIA", "SCREENS"]
 
 log = logging.getLogger(__name__)
 
@@ -142,14 +143,21 @@ class LikelihoodScorer:
         ahead = self._ahead.pop(frozenset(c.name for c in edges), None) if warm is None else None
         if ahead is not None:
             return self.count_fit(ahead.result())
-        init = None
-        if warm is not None:
-            keep = {_key(c) for c in edges}
-            init = {k: v for k, v in warm.params_.items()
-                    if not k.startswith("rbar_v[") or k in keep}
-            for c in edges:
-                init.setdefault(_key(c), _start_rbar(warm.params_))
-        return self._fit(edges, init=init)
+        return self._fit(edges, init=_warm_init(edges, warm))
+
+    @contextlib.contextmanager
+    def pool(self, workers: int):
+        """A :class:`FitPool` of ``workers`` threads, for fits started and stopped one by one.
+
+        The search's backward pass starts there the trials of the round it expects next
+        while the last trials of a round run (:func:`thermctl.structure.search.search_edges`).
+        The main thread holds the process-wide warnings filter and BLAS limit until the
+        pool is closed (see :func:`thermctl._blas.ignore_warnings`); closing it stops the
+        fits still open.
+        """
+        with ignore_warnings(BoundWarning, ConvergenceWarning), single_thread_blas(), \
+                ThreadPool(workers) as threads:
+            yield FitPool(self, threads)
 
     def speculate(self, edges):
         """Start the cold :meth:`fit` of ``edges`` in a thread now and return its Future.
@@ -463,6 +471,50 @@ def _day_t(g, need: float, what: str) -> tuple[float, str]:
     t = math.inf if sd == 0.0 else float(np.mean(g)) / (sd / math.sqrt(D))
     req = f" (needs {need:g})" if need else ""
     return t, f"{what} t {t:.1f}{req}, better on {int(np.sum(g > 0))} of {D} days"
+
+
+class FitPool:
+    """:meth:`LikelihoodScorer.fit` on the threads of a :class:`~thermctl._parallel.ThreadPool`
+    (made by :meth:`LikelihoodScorer.pool`).
+
+    ``submit(edges, warm)`` starts the fit that ``fit(edges, warm)`` would make (the same
+    start, hence the same numbers), ``result`` takes it and counts it as ``fit`` does,
+    ``cancel`` stops one that is not needed at its next likelihood evaluation; a cancelled
+    fit is never counted.
+    """
+
+    def __init__(self, scorer: LikelihoodScorer, threads: ThreadPool):
+        self.scorer, self.threads = scorer, threads
+
+    def submit(self, edges, warm):
+        """Future of ``(estimator, criterion)`` of ``edges`` warm started from ``warm``."""
+        edges = list(edges)
+        return self.threads.submit(self.scorer._fit, edges, init=_warm_init(edges, warm),
+                                   count=False)
+
+    def idle(self) -> bool:
+        """Whether a fit submitted now would start at once."""
+        return self.threads.idle()
+
+    def cancel(self, fut) -> None:
+        self.threads.cancel(fut)
+
+    def result(self, fut):
+        """``(estimator, criterion)`` of a submitted fit (waits for it), counted."""
+        return self.scorer.count_fit(fut.result())
+
+
+def _warm_init(edges, warm):
+    """Start values of the structure ``edges`` from the fit ``warm`` (None: the defaults): its
+    parameters less the air paths ``edges`` lacks; an air path new to it starts at the
+    geometric mean of its R̄_v."""
+    if warm is None:
+        return None
+    keep = {_key(c) for c in edges}
+    init = {k: v for k, v in warm.params_.items() if not k.startswith("rbar_v[") or k in keep}
+    for c in edges:
+        init.setdefault(_key(c), _start_rbar(warm.params_))
+    return init
 
 
 class _Stopped(Exception):
