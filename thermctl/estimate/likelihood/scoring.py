@@ -165,8 +165,8 @@ class LikelihoodScorer:
         A later ``fit(edges)`` without ``warm`` (on this scorer, or on one that
         :meth:`adopt` s it) returns that result: the same numbers, fitted earlier, while
         the main thread does something else (the whole-building identification fits its
-        full candidate structure this way while it decides the gain model: 18 of 125 s on
-        the twin house). The caller holds, in the main thread, one
+        full candidate structure this way while it decides the gain model, with the gain
+        model the decision is heading for). The caller holds, in the main thread, one
         ``ignore_warnings(BoundWarning, ConvergenceWarning)`` and one
         ``single_thread_blas()`` until the Future is done (both are process-wide; see
         :func:`thermctl._blas.ignore_warnings`).
