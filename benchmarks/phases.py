@@ -12,10 +12,16 @@ is the row between "gain model ... done" and the selection's first count.
 Issue 19 asks for the twin house N2 within 2 minutes on the 2-core machine: the last line
 says what the same CPU would take with every core busy throughout.
 
+With ``--against REV`` the same command runs alternately with the thermctl of another
+commit (a temporary ``git worktree``, put first on ``PYTHONPATH``) and with this checkout's,
+``--runs`` times each, and a last table compares each pair: this machine's speed drifts by
+10-20 % over minutes, so a refactor's before and after are compared within a pair.
+
 Usage::
 
     OMP_NUM_THREADS=1 python benchmarks/phases.py                   # the twin house N2
     OMP_NUM_THREADS=1 python benchmarks/phases.py --data DIR -- --workers 1
+    OMP_NUM_THREADS=1 python benchmarks/phases.py --against 6d2d509 --runs 2
 """
 
 from __future__ import annotations
@@ -48,12 +54,13 @@ def _cpu_seconds(pid: int) -> float | None:
     return sum(int(fields[k]) for k in (11, 12, 13, 14)) / tck
 
 
-def run(cmd: list[str], period: float = 0.25):
+def run(cmd: list[str], period: float = 0.25, env=None):
     """``(lines, samples, wall)``: progress lines as ``(t, text)``, CPU samples as
-    ``(t, cpu)``, both from the start of the process [s]."""
+    ``(t, cpu)``, both from the start of the process [s]. ``env``: more environment."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"})
+                            env={**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200",
+                                 **(env or {})})
     samples, lines = [(0.0, 0.0)], []
 
     def sample():
@@ -102,33 +109,13 @@ def interp(samples, t):
     return float(np.interp(t, ts, cs))
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=DATA,
-                    help="a directory with data.csv and building.yaml (default: the twin "
-                         "house N2)")
-    ap.add_argument("extra", nargs="*", help="more identify options, after --")
-    args = ap.parse_args(argv)
-    if not (args.data / "data.csv").exists():
-        raise SystemExit(f"{args.data}: no data.csv there (--data DIR)")
-    cores = os.cpu_count() or 1
-    load0 = os.getloadavg()
-    with tempfile.TemporaryDirectory() as out:
-        exe = Path(sys.executable).with_name("thermctl")
-        cmd = [str(exe), "identify", str(args.data / "data.csv"), "-b",
-               str(args.data / "building.yaml"), "-o", out, *args.extra]
-        lines, samples, wall = run(cmd)
+def table(lines, samples, wall, cores) -> float:
+    """Print the phase table of one run; returns its idle core-seconds."""
     cpu = samples[-1][1]
-    rows = phases(lines, wall)
-    print(f"# {' '.join(['thermctl identify', str(args.data), *args.extra])}")
-    print(f"machine: {cores} cores; load average at start {load0[0]:.2f} {load0[1]:.2f} "
-          f"{load0[2]:.2f}, at end {' '.join(f'{x:.2f}' for x in os.getloadavg())}; "
-          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}")
-    print()
     print("| phase | from s | wall s | CPU s | cores busy | idle core-s |")
     print("|---|---:|---:|---:|---:|---:|")
     idle = 0.0
-    for a, b, name in rows:
+    for a, b, name in phases(lines, wall):
         c = interp(samples, b) - interp(samples, a)
         w = b - a
         gap = max(cores * w - c, 0.0)
@@ -139,6 +126,75 @@ def main(argv=None):
     print()
     print(f"With every one of the {cores} cores busy throughout, the same {cpu:.0f} s of CPU "
           f"would take {cpu / cores:.0f} s.")
+    return idle
+
+
+def pairs(results) -> list[str]:
+    """Lines of the table comparing alternate runs: ``results`` is ``[(label, wall, cpu,
+    idle), ...]`` in the order run, the other commit's first in each pair."""
+    out = ["| pair | wall before → after | ratio | CPU before → after | ratio | "
+           "idle core-s |", "|---|---|---:|---|---:|---|"]
+    for k in range(0, len(results) - 1, 2):
+        (_, w0, c0, i0), (_, w1, c1, i1) = results[k], results[k + 1]
+        out.append(f"| {k // 2 + 1} | {w0:.1f} → {w1:.1f} s | {w1 / w0:.3f} | "
+                   f"{c0:.1f} → {c1:.1f} s | {c1 / c0:.3f} | {i0:.0f} → {i1:.0f} |")
+    return out
+
+
+def _worktree(rev: str, where: str) -> Path:
+    repo = Path(__file__).resolve().parents[1]
+    path = Path(where) / "base"
+    subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", "-q", str(path),
+                    rev], check=True)
+    return path
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=DATA,
+                    help="a directory with data.csv and building.yaml (default: the twin "
+                         "house N2)")
+    ap.add_argument("--against", metavar="REV",
+                    help="also run the thermctl of this commit, alternately with this one's")
+    ap.add_argument("--runs", type=int, default=2, help="with --against: pairs of runs")
+    ap.add_argument("extra", nargs="*", help="more identify options, after --")
+    args = ap.parse_args(argv)
+    if not (args.data / "data.csv").exists():
+        raise SystemExit(f"{args.data}: no data.csv there (--data DIR)")
+    cores = os.cpu_count() or 1
+    exe = Path(sys.executable).with_name("thermctl")
+    print(f"# {' '.join(['thermctl identify', str(args.data), *args.extra])}")
+    with tempfile.TemporaryDirectory() as tmp:
+        base = _worktree(args.against, tmp) if args.against else None
+        plan = ([("HEAD", None)] if base is None else
+                [(args.against, {"PYTHONPATH": str(base)}), ("HEAD", None)] * args.runs)
+        results = []
+        try:
+            for k, (label, env) in enumerate(plan):
+                load0 = os.getloadavg()
+                out = Path(tmp) / f"out{k}"
+                cmd = [str(exe), "identify", str(args.data / "data.csv"), "-b",
+                       str(args.data / "building.yaml"), "-o", str(out), *args.extra]
+                lines, samples, wall = run(cmd, env=env)
+                print()
+                if base is not None:
+                    print(f"## run {k + 1}: thermctl at {label}")
+                print(f"machine: {cores} cores; load average at start {load0[0]:.2f} "
+                      f"{load0[1]:.2f} {load0[2]:.2f}, at end "
+                      f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; "
+                      f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}")
+                print()
+                idle = table(lines, samples, wall, cores)
+                results.append((label, wall, samples[-1][1], idle))
+        finally:
+            if base is not None:
+                subprocess.run(["git", "-C", str(Path(__file__).resolve().parents[1]),
+                                "worktree", "remove", "--force", str(base)], check=False)
+    if base is not None:
+        print()
+        print(f"## {args.against} (before) against this checkout (after), run alternately")
+        print()
+        print("\n".join(pairs(results)))
 
 
 if __name__ == "__main__":

@@ -297,3 +297,13 @@ def test_phases_reads_a_process_cpu_time():
     c1 = ph._cpu_seconds(os.getpid())
     assert c1 - c0 == pytest.approx(time.process_time() - t0, abs=0.05)
     assert ph._cpu_seconds(2 ** 22 + 12345) is None      # no such process
+
+
+def test_phases_compares_alternate_runs_pair_by_pair():
+    ph = _load("phases")
+    rows = ph.pairs([("6d2d509", 180.9, 275.8, 86.0), ("HEAD", 161.9, 261.9, 62.0),
+                     ("6d2d509", 165.1, 250.8, 79.0), ("HEAD", 146.1, 237.9, 54.0)])
+    assert len(rows) == 4                       # header, rule, one row per pair
+    assert rows[2].startswith("| 1 | 180.9 → 161.9 s | 0.895 | 275.8 → 261.9 s | 0.950 |")
+    assert rows[3].startswith("| 2 | 165.1 → 146.1 s | 0.885 |")
+    assert rows[3].endswith("| 79 → 54 |")
