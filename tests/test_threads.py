@@ -190,3 +190,30 @@ def test_first_fit_beside_the_gain_decision_follows_the_decision(gains, kept, ca
         warnings.simplefilter("ignore")
         est, val = ref.fit(as_candidates(tb.spec, first))
     assert fut.result()[1] == pytest.approx(val, rel=1e-12)
+
+
+def test_a_switch_the_gain_decision_then_overturns_is_undone(floor, monkeypatch):
+    """When an evaluation of the decision's fit passes the margin but the fit ends below it,
+    the first fit started with the fast gain is stopped, and the search is left to fit that
+    structure itself (no scorer adopted); no fit keeps running."""
+    import dataclasses
+    import threading
+    import time
+
+    import thermctl.identify as ident
+    spec, meas = floor
+    cands = [("r240", "r243"), ("r241", "r247"), ("r242", "r244")]
+
+    def decide(spec, edges, cal, opt, notes, progress=None, off=None, watch=None):
+        watch(opt.selection.margin + 1.0)       # the running fit passes the margin ...
+        time.sleep(0.5)                         # (the fit beside it is under way)
+        return dataclasses.replace(opt, estimation=dataclasses.replace(
+            opt.estimation, fast_gain=False))   # ... and ends below it: left out
+
+    monkeypatch.setattr(ident, "_resolve_fast_gain", decide)
+    opt = ident.IdentifyOptions()
+    opt.split.workers = 2
+    before = threading.active_count()
+    got, ahead = ident._gain_model_and_first_fit(spec, meas, opt, [], None, cands)
+    assert got.estimation.fast_gain is False and ahead is None
+    assert threading.active_count() == before

@@ -76,8 +76,9 @@ class ThreadPool:
 
     def idle(self) -> bool:
         """Whether a thread would start a task submitted now (fewer open tasks than threads)."""
+        # done but not yet called back: Future.set_result wakes the waiters first
         with self._lock:
-            return len(self._open) < self.threads
+            return sum(1 for f in self._open if not f.done()) < self.threads
 
     @staticmethod
     def cancel(fut) -> None:

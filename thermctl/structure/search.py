@@ -392,20 +392,23 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             fits = [scorer.fit(st, warm=fitted) for st in todo.values()]
         done.update(zip(todo, fits))
 
-    def next_round(rests, skipped, last):
+    def next_round(rests, skipped, last, finished):
         """The trials of the backward round after the one of ``rests`` (removed edge → the
-        structure without it), as far as its finished trials tell: structure → (edges, the
-        fit it starts from). After the cheapest removal finished so far, when it is below
-        the margin; else, when the round skipped edges, the round of every edge."""
+        structure without it), as far as its trials fitted so far tell (in ``done`` or
+        ``finished``): structure → (edges, the fit it starts from). After the cheapest
+        removal so far, when it is below the margin; else, when the round skipped edges, the
+        round of every edge."""
         cost = {}
         for name, rest in rests.items():
             key = frozenset(x.name for x in rest)
-            if key in done:
-                cost[name] = done[key][1] - val
+            got = finished.get(key) or done.get(key)
+            if got is not None:
+                cost[name] = got[1] - val
         cheap = [n for n in cost if cost[n] < margin]
         if cheap:
             pick = min(cheap, key=cost.get)
-            nxt, warm = rests[pick], done[frozenset(x.name for x in rests[pick])][0]
+            key = frozenset(x.name for x in rests[pick])
+            nxt, warm = rests[pick], (finished.get(key) or done[key])[0]
             seen = {**last, **cost}
             again = (nxt if recheck is None else
                      [c for c in nxt if seen.get(c.name, -math.inf) < recheck * margin]) or nxt
@@ -422,12 +425,12 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
 
     def fit_round(pool, rests, skipped, last, ahead):
         """:func:`fit_missing` of a backward round's trials; on ``pool`` (the scorer's, when
-        it has one) a thread that the round's last trials leave free starts the trials of
-        the round its finished ones point to (:func:`next_round`; ``ahead``: structure →
-        (future, the fit it started from)). A round takes such a fit only when it is that
-        round's trial from that very fit, so the search is the serial one; the others are
-        stopped. On the twin house one round's trials take 1.5-8.7 s each, and a round of 9
-        on 2 threads left one idle for 5.4 s at its end."""
+        it has one) a thread that the round's trials leave free starts the trials of the
+        round they point to (:func:`next_round`; ``ahead``: structure → (future, the fit it
+        started from)). A round takes such a fit only when it is that round's trial from
+        that very fit, so the search is the serial one; the others are stopped. On the twin
+        house one round's trials take 1.5-8.7 s each, and a round of 9 on 2 threads left one
+        idle for 5.4 s at its end."""
         if pool is None:
             fit_missing(rests.values())
             return
@@ -435,24 +438,30 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         for key in list(ahead):
             if key not in keys or ahead[key][1] is not fitted:
                 pool.cancel(ahead.pop(key)[0])
-        pending = {}
+        pending, finished = {}, {}
         for key, rest in keys.items():
             if key not in done:
                 pending[key] = ahead.pop(key)[0] if key in ahead else pool.submit(rest, fitted)
-        while pending:
-            # a fit started ahead that ends frees a thread for the next one of its round
-            wait([*pending.values(), *(f for f, _ in ahead.values() if not f.done())],
-                 return_when=FIRST_COMPLETED)
-            for key in [k for k, f in pending.items() if f.done()]:
-                done[key] = pool.result(pending.pop(key))
-            if not pending:
-                break
-            expect = next_round(rests, skipped, last)
+
+        def look_ahead():
+            expect = next_round(rests, skipped, last, finished)
             for key in [k for k in ahead if k not in expect or ahead[k][1] is not expect[k][1]]:
                 pool.cancel(ahead.pop(key)[0])
             for key, (st, warm) in expect.items():
                 if key not in ahead and key not in done and key not in pending and pool.idle():
                     ahead[key] = (pool.submit(st, warm), warm)
+
+        try:
+            while pending:
+                look_ahead()            # a round of fewer trials than threads: at once
+                # a fit started ahead that ends frees a thread for the next one of its round
+                wait([*pending.values(), *(f for f, _ in ahead.values() if not f.done())],
+                     return_when=FIRST_COMPLETED)
+                for key in [k for k, f in pending.items() if f.done()]:
+                    finished[key] = pool.result(pending.pop(key))
+        finally:
+            # in the serial order, whatever the order they ended in (SearchResult.trials)
+            done.update((k, finished[k]) for k in keys if k in finished)
 
     def backward():
         use = workers > 1 and hasattr(scorer, "pool")

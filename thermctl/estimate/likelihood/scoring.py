@@ -153,7 +153,8 @@ class LikelihoodScorer:
         while the last trials of a round run (:func:`thermctl.structure.search.search_edges`).
         The main thread holds the process-wide warnings filter and BLAS limit until the
         pool is closed (see :func:`thermctl._blas.ignore_warnings`); closing it stops the
-        fits still open.
+        fits still open. Only L-BFGS-B fits stop early: an IPOPT fit (``solver="ipopt"``)
+        runs to its end, and the pool waits for it.
         """
         with ignore_warnings(BoundWarning, ConvergenceWarning), single_thread_blas(), \
                 ThreadPool(workers) as threads:
@@ -180,15 +181,18 @@ class LikelihoodScorer:
         self._ahead[key] = fut
         return fut
 
-    def cancel_ahead(self) -> None:
+    def cancel_ahead(self, wait_: bool = True) -> list:
         """Stop the fits started ahead at their next likelihood evaluation (a wrong guess
         should not hold a core: on the demo the unneeded fit took longer than the decision
-        it was started beside), wait for their threads, and forget them."""
+        it was started beside), wait for their threads (unless ``wait_`` is False), and
+        forget them. Returns their futures. Only L-BFGS-B fits stop early."""
         for stop in self._stops.values():
             stop.set()
         futs = list(self._ahead.values())
         self._ahead, self._stops = {}, {}
-        wait(futs)
+        if wait_:
+            wait(futs)
+        return futs
 
     def adopt(self, other: "LikelihoodScorer") -> None:
         """Take the fits ``other`` started ahead (:meth:`speculate`); ``other`` must ask the
