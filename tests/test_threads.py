@@ -217,3 +217,29 @@ def test_a_switch_the_gain_decision_then_overturns_is_undone(floor, monkeypatch)
     got, ahead = ident._gain_model_and_first_fit(spec, meas, opt, [], None, cands)
     assert got.estimation.fast_gain is False and ahead is None
     assert threading.active_count() == before
+
+
+def test_grid_screening_on_threads_equals_serial(floor):
+    """The grid screening evaluates every candidate of every job on the threads (one job
+    alone too: the additions' screening); the values are the serial ones, digit for digit,
+    and each job counts as one fit, as in the serial loop."""
+    from thermctl.estimate.likelihood.scoring import LikelihoodScorer
+    from thermctl.structure.search import as_candidates
+    spec, meas = floor
+    cs = as_candidates(spec, [("r240", "r243"), ("r241", "r247"), ("r242", "r244"),
+                              ("r241", "r242")])
+    scorer = LikelihoodScorer(spec, meas, max_iter=60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        f0, _ = scorer.fit([])
+        f1, _ = scorer.fit(cs[:1], warm=f0)
+    jobs = [(cs[:1], cs[1:], f1), ([], cs, f0)]
+    n0 = scorer.n_fits
+    serial = [scorer.screen(*j) for j in jobs]
+    n1 = scorer.n_fits
+    both = scorer.screen_many(jobs, workers=2)
+    n2 = scorer.n_fits
+    one = scorer.screen_many(jobs[1:], workers=2)
+    assert both == serial and one == serial[1:]
+    assert list(both[1]) == [c.name for c in cs]           # in the candidates' order
+    assert n1 - n0 == n2 - n1 == 2

@@ -331,12 +331,19 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         if note:
             lost[name] = note
 
+    def screen(edges, rest, fit):
+        """``scorer.screen``, on the ``workers`` threads when the scorer can (one problem's
+        candidates side by side)."""
+        if workers > 1 and hasattr(scorer, "screen_many"):
+            return scorer.screen_many([(edges, rest, fit)], workers=workers)[0]
+        return scorer.screen(edges, rest, fit)
+
     if direction in ("forward", "both"):
         while max_edges is None or len(cur) < max_edges:
             rest = [c for c in cands if c not in cur]
             if not rest:
                 break
-            screened = scorer.screen(cur, rest, fitted)
+            screened = screen(cur, rest, fitted)
             best_screen.update(screened)        # the last round's value: with the final edges
             pick = min(screened, key=screened.get)
             c = by_name[pick]
@@ -619,7 +626,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         rest = [c for c in swaps if c.name not in names]
         if not rest:
             return False
-        screened = scorer.screen(cur, rest, fitted)
+        screened = screen(cur, rest, fitted)
         for name, dv in screened.items():
             add_screen[name] = min(add_screen.get(name, math.inf), dv)
         # refit the two best-screened, as a swap round does, and (add_refits > 2) go on down
