@@ -231,8 +231,11 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     progress : callable, optional
         ``progress(message)`` after each decision.
     workers : int
-        Trial fits of a backward step run this many at a time, when the scorer has a
-        ``fit_many(structures, warm=, workers=)`` (threads; the result is the serial one).
+        Trial fits run this many at a time, when the scorer has a ``fit_many(structures,
+        warm=, workers=)``, and screenings when it has a ``screen_many`` (threads; the result
+        is the serial one). With a scorer's ``pool(workers)`` the backward pass also starts
+        the trials of the round it expects next on a thread the current round leaves free,
+        and takes them only when they are that round's own.
     swaps : list of Candidate, optional
         After the backward pass, try replacing each kept edge by one of these that shares a
         zone with it (same number of edges). Each round screens them all (each kept edge's
