@@ -150,7 +150,7 @@ def _worktree(rev: str, where: str) -> Path:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--data", type=Path, default=DATA,
                     help="a directory with data.csv and building.yaml (default: the twin "
                          "house N2)")
