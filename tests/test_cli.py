@@ -382,3 +382,24 @@ def test_identify_per_edge_flags_reach_the_options(tb_dir, tmp_path, monkeypatch
               "--out", tmp_path / "o", *flags)
     assert res.exit_code != 0 and "stopped by the test" in res.output
     assert seen["per_edge"] == want and type(seen["per_edge"]) is type(want)
+
+
+def test_ctrl_c_inside_a_casadi_callback_stops_the_command_as_ctrl_c_does():
+    """CasADi passes a KeyboardInterrupt raised in a Python callback on as a RuntimeError
+    naming it; the commands turn it back into KeyboardInterrupt (exit status 130, no
+    traceback) and let any other RuntimeError through."""
+    from thermctl.cli._common import handle_errors
+
+    @handle_errors
+    def interrupted():
+        raise RuntimeError("Error in Function::call for 'nll' [CallbackInternal]:\n"
+                           "KeyboardInterrupt")
+
+    @handle_errors
+    def failed():
+        raise RuntimeError("something else")
+
+    with pytest.raises(KeyboardInterrupt):
+        interrupted()
+    with pytest.raises(RuntimeError, match="something else"):
+        failed()

@@ -917,3 +917,29 @@ def test_scorer_fits_stop_on_the_stall_rule(sim5, net5):
     # the 5-room fit converges before 20 evaluations gain less than 0.05 nats: the same
     # optimum with and without the rule
     assert v == pytest.approx(v_full, abs=0.1)
+
+
+class _InterruptedProblem(_QuarticProblem):
+    """The quartic, with Ctrl-C at the 5th evaluation as CasADi passes it on from a Python
+    callback (a RuntimeError whose message names it); ``fail`` instead: a numerical failure."""
+
+    def __init__(self, message):
+        super().__init__()
+        self.message = message
+
+    def nll_grad(self, eta):
+        if len(self.values) == 4:
+            self.values.append(np.nan)
+            raise RuntimeError(self.message)
+        return super().nll_grad(eta)
+
+
+def test_ctrl_c_inside_a_callback_stops_the_fit_a_numerical_failure_does_not():
+    from thermctl.estimate.likelihood.optimize import minimize_criterion
+    with pytest.raises(KeyboardInterrupt):
+        minimize_criterion(_InterruptedProblem("KeyboardInterrupt"), max_iter=100)
+    # a failure of the evaluation itself: the optimiser steps back from it and returns
+    # its best point, no error
+    pb = _InterruptedProblem("Error in Function::call for 'nll' [MXFunction]: NaN detected")
+    res = minimize_criterion(pb, max_iter=100)
+    assert len(pb.values) > 5 and res.value <= pb.values[3] < pb.values[0]

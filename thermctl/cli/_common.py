@@ -61,6 +61,12 @@ def handle_errors(func):
             except (OSError, PermissionError) as exc:
                 err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
                 raise typer.Exit(2) from None
+            except RuntimeError as exc:
+                # Ctrl-C inside a CasADi callback arrives as CasADi's RuntimeError: the
+                # user's stop, as anywhere else (no traceback, exit status 130)
+                if "KeyboardInterrupt" in str(exc):
+                    raise KeyboardInterrupt from None
+                raise
     return wrapper
 
 

@@ -180,6 +180,10 @@ def _lbfgs(problem, criterion, eta0, free, lo, hi, s, max_iter, tol, stall=None)
         try:
             f, g = fg(eta)
         except RuntimeError as exc:      # CasADi numerical failure: step back
+            if "KeyboardInterrupt" in str(exc):
+                # Ctrl-C inside a callback reaches us as CasADi's RuntimeError: a user's
+                # stop, not a failed evaluation to step back from
+                raise KeyboardInterrupt from exc
             log.debug("criterion failed at %s: %s", eta, exc)
             return np.inf, np.zeros(len(idx))
         if not np.isfinite(f) or not np.all(np.isfinite(g)):
