@@ -1543,17 +1543,12 @@ def _watched(make_problem, bic_ref, watch):
     likelihood evaluation [-], the line search's trial points included (the BIC
     :class:`LikelihoodEstimator` would give that point). ``watch`` runs in the fitting
     thread and must not raise: an error there reads as a failed evaluation."""
-    def make(*args, **kwargs):
-        pb = make_problem(*args, **kwargs)
-        fg, k, n = pb.nll_grad, int(pb.layout.free().sum()), max(pb.n_obs, 1)
+    from .estimate.likelihood.scoring import hooked
 
-        def nll_grad(eta):
-            f, g = fg(eta)
-            watch(bic_ref - (2.0 * f + k * math.log(n)))
-            return f, g
-        pb.nll_grad = nll_grad
-        return pb
-    return make
+    def after(f, pb):
+        k, n = int(pb.layout.free().sum()), max(pb.n_obs, 1)
+        watch(bic_ref - (2.0 * f + k * math.log(n)))
+    return hooked(make_problem, after=after)
 
 
 def _greybox_fit(net, cal, opt, notes, init=None, per_edge=False, progress=None):

@@ -28,7 +28,7 @@ from .estimator import LikelihoodEstimator
 from .kstep import kstep_block_mse
 from .optimize import STALL
 
-__all__ = ["LikelihoodScorer", "FitPool", "CRITERIA", "SCREENS"]
+__all__ = ["LikelihoodScorer", "FitPool", "hooked", "CRITERIA", "SCREENS"]
 
 log = logging.getLogger(__name__)
 
@@ -554,20 +554,36 @@ class _Stopped(Exception):
     """A fit started ahead was stopped (:meth:`LikelihoodScorer.cancel_ahead`)."""
 
 
-def _stoppable(make_problem, stop):
-    """``make_problem`` whose problems raise :class:`_Stopped` at the next likelihood
-    evaluation once ``stop`` is set."""
+def hooked(make_problem, before=None, after=None):
+    """``make_problem`` whose problems call ``before()`` ahead of every likelihood
+    evaluation with its gradient (``nll_grad``, what L-BFGS-B calls) and ``after(value,
+    problem)`` after it, with the negative log-likelihood there [-]. A fit started ahead
+    stops through ``before`` (:meth:`LikelihoodScorer.speculate`); the gain-model decision
+    follows its fit through ``after`` (``thermctl.identify``). Both run in the fitting
+    thread; an error from ``after`` reads as a failed evaluation."""
     def make(*args, **kwargs):
         pb = make_problem(*args, **kwargs)
         fg = pb.nll_grad
 
         def nll_grad(eta):
-            if stop.is_set():
-                raise _Stopped
-            return fg(eta)
+            if before is not None:
+                before()
+            f, g = fg(eta)
+            if after is not None:
+                after(f, pb)
+            return f, g
         pb.nll_grad = nll_grad
         return pb
     return make
+
+
+def _stoppable(make_problem, stop):
+    """``make_problem`` whose problems raise :class:`_Stopped` at the next likelihood
+    evaluation once ``stop`` is set."""
+    def check():
+        if stop.is_set():
+            raise _Stopped
+    return hooked(make_problem, before=check)
 
 
 def _same_data(a, b) -> bool:
