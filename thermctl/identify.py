@@ -1363,7 +1363,8 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
 
     def watch(gain):
         # in the main thread, inside the decision's likelihood evaluations: an error here
-        # would read as a failed evaluation of that fit, so the guess stays as it is
+        # would end that fit or read as a failed evaluation of it, so it is caught and the
+        # guess stays as it is
         evals[0] += 1
         if gain > opt.selection.margin and not guess.get("use") and "failed" not in guess:
             try:
@@ -1542,7 +1543,7 @@ def _watched(make_problem, bic_ref, watch):
     """``make_problem`` whose problems tell ``watch`` the BIC gain over ``bic_ref`` of every
     likelihood evaluation [-], the line search's trial points included (the BIC
     :class:`LikelihoodEstimator` would give that point). ``watch`` runs in the fitting
-    thread and must not raise: an error there reads as a failed evaluation."""
+    thread and must not raise (:func:`~thermctl.estimate.likelihood.scoring.hooked`)."""
     from .estimate.likelihood.scoring import hooked
 
     def after(f, pb):

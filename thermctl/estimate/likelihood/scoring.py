@@ -414,7 +414,8 @@ class LikelihoodScorer:
         """Criterion change of each candidate at a few R̄_v values, all else held.
 
         One problem holds the current edges and every candidate; a candidate is "off" at
-        R̄_v = R_OFF (a conductance of ~10⁻³ W/K) and tried at the current R̄_v × {1/4, 1, 4}.
+        R̄_v = ``_R_OFF`` (a conductance of ~10⁻³ W/K) and tried at the current R̄_v ×
+        {1/4, 1, 4}.
         Costs 3 likelihood evaluations per candidate instead of a fit each.
         """
         grid = self._grid_problem(cur, rest, base)
@@ -560,7 +561,8 @@ def hooked(make_problem, before=None, after=None):
     problem)`` after it, with the negative log-likelihood there [-]. A fit started ahead
     stops through ``before`` (:meth:`LikelihoodScorer.speculate`); the gain-model decision
     follows its fit through ``after`` (``thermctl.identify``). Both run in the fitting
-    thread; an error from ``after`` reads as a failed evaluation."""
+    thread. A RuntimeError from either reads as a failed evaluation (L-BFGS-B steps back
+    from it), any other error ends the fit."""
     def make(*args, **kwargs):
         pb = make_problem(*args, **kwargs)
         fg = pb.nll_grad
