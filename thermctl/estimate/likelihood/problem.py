@@ -41,6 +41,8 @@ import copy
 import dataclasses
 import logging
 import math
+import threading
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -128,7 +130,7 @@ class LikelihoodProblem:
         self._prepare_inputs()
         self._make_layout(rbar_v, c_v, init or {})
         self._make_chunks()
-        self._build()
+        self._setup_graphs()
 
     # ------------------------------------------------------------------ data → arrays
     def _prepare_inputs(self):
@@ -713,17 +715,77 @@ class LikelihoodProblem:
             A = A + sum((hi - 1.0) * Ak.toarray() for Ak, _ in self.ua_mats)
         return 1.1 * np.abs(A).sum(axis=0).max() * self.data.dt
 
-    def _build(self):
+    def _setup_graphs(self):
+        """The criteria's CasADi graphs, one per number of squarings (made on first use).
+
+        The discretisation's squarings were once set by the parameter box's fastest corner
+        (every R̄_v at its lower bound: ‖A‖₁·dt ≈ 5e4 on the twin house N2, 18 squarings),
+        where the fits never go: at the fitted values ‖A‖₁·dt is 427 (11 squarings), and a
+        gradient took 50.6 ms with 18 squarings against 44.9 ms with 11 (the value 2e-8 apart
+        of 45 248, the fewer squarings the closer to exact). Each evaluation now takes the
+        graph of the squarings its own ``eta`` needs (:meth:`squarings_at`): the value at an
+        ``eta`` does not depend on what was evaluated before, so threads and serial runs
+        give the same numbers.
+        """
+        self.box_squarings = kalman.n_squarings(self._norm_bound())
+        C = self.zone_pick
+        if self.n_e:
+            C[np.arange(self.ny), self.n_net + self.n_d + np.arange(self.ny)] = 1.0
+        self.C = C
+        eta = ca.MX.sym("eta", len(self.layout))
+        A = self._continuous(eta)[0]
+        norm = ca.mmax(ca.sum1(ca.fabs(A)))
+        if self.i_loop:
+            norm = ca.fmax(norm, ca.mmax(ca.sum1(ca.fabs(self._loop_A(A, eta)[0]))))
+        # the same 10 % above the 1-norm as the box bound (:meth:`_norm_bound`)
+        self._norm_fn = ca.Function("norm_dt", [eta], [1.1 * self.data.dt * norm])
+        self._graphs = {}
+        self._graphs_lock = threading.Lock()
+        self._graph(self.layout.eta0())
+
+    def squarings_at(self, eta) -> int:
+        """Halvings of the step that bring ``‖A(eta)‖₁·dt`` (plus 10 %) below 1/4, at most
+        the box's (:attr:`box_squarings`)."""
+        nd = float(self._norm_fn(np.asarray(eta, float)))
+        if not np.isfinite(nd):
+            return self.box_squarings
+        return min(self.box_squarings, kalman.n_squarings(nd))
+
+    def _graph(self, eta=None):
+        """The graph for ``eta`` (:meth:`squarings_at`); ``None``: the box's, valid over the
+        whole parameter box (for a solver that cannot switch graphs, IPOPT)."""
+        s = self.box_squarings if eta is None else self.squarings_at(eta)
+        g = self._graphs.get(s)
+        if g is None:
+            with self._graphs_lock:
+                g = self._graphs.get(s)
+                if g is None:
+                    g = self._graphs[s] = self._make_graph(s)
+        return g
+
+    @property
+    def _eta(self):
+        return self._graph().eta
+
+    @property
+    def _nll(self):
+        return self._graph().nll
+
+    @property
+    def _kstep(self):
+        return self._kstep_of(self._graph())
+
+    def _make_graph(self, squarings: int) -> SimpleNamespace:
+        g = SimpleNamespace(squarings=squarings)
         npar = len(self.layout)
         eta = ca.MX.sym("eta", npar)
         A, B, Sig, R = self._continuous(eta)
-        self.squarings = kalman.n_squarings(self._norm_bound())
         two = self.regime is not None          # two regimes: gain schedule or loop gain
         sched = self.i_occ is not None
         loop = bool(self.i_loop)
-        Phi, Gam, Qd = kalman.discretize(A, B, Sig, self.data.dt, self.squarings)
+        Phi, Gam, Qd = kalman.discretize(A, B, Sig, self.data.dt, squarings)
         if loop:
-            Phi1, Gam1, GamY, Qd1 = self._loop_discretized(A, B, Sig, eta)
+            Phi1, Gam1, GamY, Qd1 = self._loop_discretized(A, B, Sig, eta, squarings)
         if sched:
             # in occupied hours the random-walk gains' increments over a step have
             # ratio × their variance σ_φ²·dt: the excess enters the gain states at the
@@ -733,17 +795,13 @@ class LikelihoodProblem:
             gsel = np.zeros(self.n)
             gsel[self.n_net:self.n_net + self.n_d] = self.data.dt
             Qd_occ = Qd + (ca.exp(eta[self.i_occ]) - 1.0) * ca.diag(ca.diag(Sig) * ca.DM(gsel))
-        C = self.zone_pick
-        if self.n_e:
-            C[np.arange(self.ny), self.n_net + self.n_d + np.arange(self.ny)] = 1.0
-        self.C = C
-        C = ca.DM(C)
-        self._dare = None
+        C = ca.DM(self.C)
+        g.dare = None
         if self.options.riccati == "implicit":
-            # kept on self: the CasADi graph only holds a reference to the callback
-            self._dare = kalman.DareCallback(f"dare_{id(self):x}", self.C)
+            # kept with the graph: the CasADi graph only holds a reference to the callback
+            g.dare = kalman.DareCallback(f"dare_{id(self):x}_{squarings}", self.C)
         P, S, Kf, change = kalman.stationary_filter(Phi, C, Qd, R, self.options.sda_iterations,
-                                                    self._dare)
+                                                    g.dare)
         ThB = self._theta_basis(eta)
         X0 = self._initial_states(A, B, ThB, eta)
         PhiK = ca.mtimes(Phi, Kf)
@@ -759,7 +817,7 @@ class LikelihoodProblem:
             if sched:
                 Phi1, Qd1 = Phi, Qd_occ
             P1, S1, Kf1, _ = kalman.stationary_filter(Phi1, C, Qd1, R,
-                                                      self.options.sda_iterations, self._dare)
+                                                      self.options.sda_iterations, g.dare)
             PhiK1 = ca.mtimes(Phi1, Kf1)
             cols1 = self.regime.astype(float)
             GZ = dense_mtimes(PhiK, ca.DM(self.Y_lay * (1.0 - cols1))) \
@@ -808,35 +866,28 @@ class LikelihoodProblem:
             const = self.ny * kalman.LOG2PI
         quad = ca.sum2(quad_cols)
         nll = 0.5 * (quad + ldet_sum + self.n_cols * const)
-        self._col_terms = 0.5 * (quad_cols + ldet_row + mask_row * const)
-        self._eta = eta
-        self._nll = nll
-        self.nll_fn = ca.Function("nll", [eta], [nll], ["eta"], ["nll"])
-        self.nll_grad_fn = ca.Function("nll_grad", [eta],
-                                       [nll, ca.densify(ca.gradient(nll, eta))],
-                                       ["eta"], ["nll", "grad"])
-        self._nll_buf = BufferedFunction(self.nll_fn)
-        self._nll_grad_buf = BufferedFunction(self.nll_grad_fn)
-        self.matrices_fn = ca.Function(
+        g.col_terms = 0.5 * (quad_cols + ldet_row + mask_row * const)
+        g.eta = eta
+        g.nll = nll
+        g.nll_buf = BufferedFunction(ca.Function("nll", [eta], [nll], ["eta"], ["nll"]))
+        g.nll_grad_buf = BufferedFunction(ca.Function(
+            "nll_grad", [eta], [nll, ca.densify(ca.gradient(nll, eta))],
+            ["eta"], ["nll", "grad"]))
+        g.matrices_fn = ca.Function(
             "matrices", [eta], [A, B, Sig, R, Phi, Gam, Qd, P, S, Kf, X0, ThB, change] + occ_extra,
             ["eta"], ["A", "B", "Sigma", "R", "Phi", "Gamma", "Qd", "P", "S", "Kf", "X0",
                       "Theta", "change"]
             + (["P_occ", "S_occ", "Kf_occ", "Qd_occ"] if sched else [])
             + (["P_on", "S_on", "Kf_on", "Qd_on", "Phi_on", "Gamma_on", "Gamma_y"] if loop else []))
-        self._hess = {}
-        self._kstep_expr = None
-        self._kstep_parts = (X, E, (Kf, Kf1) if two else Kf, Phi, Gam, C, ThB_full,
-                             (Phi1, Gam1, GamY) if loop else None) if self.n_restarts else None
+        g.hess = {}
+        g.kstep = g.kstep_buf = g.kstep_grad_buf = None
+        g.kstep_parts = (X, E, (Kf, Kf1) if two else Kf, Phi, Gam, C, ThB_full,
+                         (Phi1, Gam1, GamY) if loop else None) if self.n_restarts else None
+        return g
 
-    def _loop_discretized(self, A, B, Sig, eta):
-        """``(Phi_on, Gamma_on, Gamma_y, Qd_on)``: the model with the supply on, each loop's
-        ``k_z·(y_z − T_z)`` added, discretised over the step with the reading ``y_z`` held.
-
-        The loop term moves ``k_z·inv_cz`` [1/s] into the zone's diagonal of ``A`` (with
-        ``internal_mass``, divided by its factor like every term of its equation) and the
-        same into an input column for the held reading; ``Gamma_y`` maps the readings of
-        every measured zone (zero columns for zones without a loop).
-        """
+    def _loop_A(self, A, eta):
+        """``(A_on, B_y)``: the state matrix with every loop's ``k_z·(y_z − T_z)`` in it and the
+        input matrix of the held readings (see :meth:`_loop_discretized`)."""
         inv_f = self._inv_factor(eta)
         By = ca.MX(self.n, self.ny)
         for j, i in zip(self.loop_zones, self.i_loop):
@@ -845,30 +896,40 @@ class LikelihoodProblem:
             if inv_f is not None:
                 c = c * inv_f[z]
             By[z, j] = c
-        A_on = A - ca.mtimes(By, ca.DM(self.zone_pick))
-        Phi1, GG, Qd1 = kalman.discretize(A_on, ca.horzcat(B, By), Sig, self.data.dt,
-                                          self.squarings)
+        return A - ca.mtimes(By, ca.DM(self.zone_pick)), By
+
+    def _loop_discretized(self, A, B, Sig, eta, squarings: int):
+        """``(Phi_on, Gamma_on, Gamma_y, Qd_on)``: the model with the supply on, each loop's
+        ``k_z·(y_z − T_z)`` added, discretised over the step with the reading ``y_z`` held.
+
+        The loop term moves ``k_z·inv_cz`` [1/s] into the zone's diagonal of ``A`` (with
+        ``internal_mass``, divided by its factor like every term of its equation) and the
+        same into an input column for the held reading; ``Gamma_y`` maps the readings of
+        every measured zone (zero columns for zones without a loop).
+        """
+        A_on, By = self._loop_A(A, eta)
+        Phi1, GG, Qd1 = kalman.discretize(A_on, ca.horzcat(B, By), Sig, self.data.dt, squarings)
         return Phi1, GG[:, :self.nw], GG[:, self.nw:], Qd1
 
-    @property
-    def _kstep(self):
-        """The k-step criterion (MX), built on first use; None without restarts.
+    def _kstep_of(self, g):
+        """The k-step criterion (MX) of graph ``g``, built on first use; None without restarts.
 
         Lazy because most problems never use it (the selection's fits are on the
         likelihood). Its gradient was about a fifth of a build (profiled on a 38-state
         local problem of the 25-zone corridor); a whole local fit's CPU time did not move
         measurably (6.1–6.7 s before, 6.5–7.0 s after, on a loaded machine).
         """
-        if self._kstep_expr is None and self._kstep_parts is not None:
-            eta = self._eta
-            self._kstep_expr = J = self._build_kstep(*self._kstep_parts)
-            self.kstep_fn = ca.Function("kstep", [eta], [J], ["eta"], ["J"])
-            self.kstep_grad_fn = ca.Function("kstep_grad", [eta],
-                                             [J, ca.densify(ca.gradient(J, eta))],
-                                             ["eta"], ["J", "grad"])
-            self._kstep_buf = BufferedFunction(self.kstep_fn)
-            self._kstep_grad_buf = BufferedFunction(self.kstep_grad_fn)
-        return self._kstep_expr
+        if g.kstep is None and g.kstep_parts is not None:
+            with self._graphs_lock:
+                if g.kstep is None:
+                    J = self._build_kstep(*g.kstep_parts)
+                    g.kstep_buf = BufferedFunction(ca.Function("kstep", [g.eta], [J],
+                                                               ["eta"], ["J"]))
+                    g.kstep_grad_buf = BufferedFunction(ca.Function(
+                        "kstep_grad", [g.eta], [J, ca.densify(ca.gradient(J, g.eta))],
+                        ["eta"], ["J", "grad"]))
+                    g.kstep = J
+        return g.kstep
 
     def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full, on=None):
         LM = self.L * self.M
@@ -922,45 +983,60 @@ class LikelihoodProblem:
 
     def release_buffers(self) -> None:
         """Free the evaluation buffers (tens of MB); the next evaluation makes them again."""
-        bufs = [getattr(self, n, None) for n in ("_nll_buf", "_nll_grad_buf", "_kstep_buf",
-                                                   "_kstep_grad_buf")]
-        for buf in bufs + list(self._hess.values()):
-            if isinstance(buf, BufferedFunction):
-                buf.release()
+        for g in list(self._graphs.values()):
+            for buf in [g.nll_buf, g.nll_grad_buf, g.kstep_buf, g.kstep_grad_buf,
+                        *g.hess.values()]:
+                if isinstance(buf, BufferedFunction):
+                    buf.release()
 
     def nll(self, eta) -> float:
         """Negative log-likelihood [-] (2π term included)."""
-        return float(self._nll_buf(eta)[0][0])
+        return float(self._graph(eta).nll_buf(eta)[0][0])
 
     def nll_grad(self, eta):
-        f, g = self._nll_grad_buf(eta)
+        f, g = self._graph(eta).nll_grad_buf(eta)
         return float(f[0]), g
 
     def kstep(self, eta) -> float:
         """k-step criterion: sum of squared errors over horizons 1..H at every restart [K²]."""
-        self._need_kstep()
-        return float(self._kstep_buf(eta)[0][0])
+        g = self._kstep_graph(eta)
+        return float(g.kstep_buf(eta)[0][0])
 
     def kstep_grad(self, eta):
-        self._need_kstep()
-        f, g = self._kstep_grad_buf(eta)
-        return float(f[0]), g
+        f, grad = self._kstep_graph(eta).kstep_grad_buf(eta)
+        return float(f[0]), grad
+
+    def _kstep_graph(self, eta):
+        g = self._graph(eta)
+        if self._kstep_of(g) is None:
+            self._need_kstep()
+        return g
 
     def _need_kstep(self):
-        if self._kstep is None:
+        if self.n_restarts == 0:
             raise DataError(f"no k-step restart fits in the data: every segment is shorter than "
                             f"burn-in + horizon ({self.options.burn_in / 3600:g} h + "
                             f"{self.options.horizon / 3600:g} h)")
 
+    def _cached(self, g, key, make):
+        """``g.hess[key]``, made by ``make()`` on first use (once, whichever thread asks)."""
+        f = g.hess.get(key)
+        if f is None:
+            with self._graphs_lock:
+                f = g.hess.get(key)
+                if f is None:
+                    f = g.hess[key] = make()
+        return f
+
     def hessian(self, eta, criterion: str = "likelihood") -> np.ndarray:
         """Exact Hessian of the criterion in ``eta`` (built on first use)."""
-        if criterion not in self._hess:
-            expr = self._nll if criterion == "likelihood" else self._kstep
-            if expr is None:
-                self._need_kstep()
-            H, _ = ca.hessian(expr, self._eta)
-            self._hess[criterion] = ca.Function(f"hess_{criterion}", [self._eta], [H])
-        H = np.asarray(ca.densify(self._hess[criterion](np.asarray(eta, float))))
+        g = self._graph(eta) if criterion == "likelihood" else self._kstep_graph(eta)
+
+        def make():
+            expr = g.nll if criterion == "likelihood" else g.kstep
+            H, _ = ca.hessian(expr, g.eta)
+            return ca.Function(f"hess_{criterion}", [g.eta], [H])
+        H = np.asarray(ca.densify(self._cached(g, criterion, make)(np.asarray(eta, float))))
         return 0.5 * (H + H.T)
 
     def block_scores(self, eta, block: float = 86400.0, threads: int = 1) -> np.ndarray:
@@ -979,19 +1055,22 @@ class LikelihoodProblem:
         ndarray, shape (n_blocks, n_params)
             ``∂ nll_b / ∂ eta`` for every block with observations (they sum to the gradient).
         """
-        if "weighted" not in self._hess:
+        eta = np.asarray(eta, float)
+        g = self._graph(eta)
+
+        def make():
             # one reverse sweep per block (a Jacobian of all blocks at once would make
             # CasADi differentiate the Riccati callback column by column)
             wcol = ca.MX.sym("w", self.L * self.M)
-            f = ca.dot(wcol, self._col_terms.T)
-            self._hess["weighted"] = BufferedFunction(ca.Function(
-                "wnll_grad", [self._eta, wcol], [ca.densify(ca.gradient(f, self._eta))]))
+            f = ca.dot(wcol, g.col_terms.T)
+            return BufferedFunction(ca.Function(
+                "wnll_grad", [g.eta, wcol], [ca.densify(ca.gradient(f, g.eta))]))
+        fn = self._cached(g, "weighted", make)
         bid = self._block_ids(block)
-        eta = np.asarray(eta, float)
         ids = np.unique(bid[bid >= 0])
 
         def score(b):
-            return self._hess["weighted"](eta, (bid == b).astype(float))[0]
+            return fn(eta, (bid == b).astype(float))[0]
         return np.array(thread_map(score, ids, threads)).reshape(len(ids), len(self.layout))
 
     def _block_ids(self, block: float) -> np.ndarray:
@@ -1010,9 +1089,11 @@ class LikelihoodProblem:
         nll : ndarray
             ``nll_b`` of those blocks [-]; they sum to :meth:`nll`.
         """
-        if "col_terms" not in self._hess:
-            self._hess["col_terms"] = ca.Function("col_terms", [self._eta], [self._col_terms])
-        cols = np.asarray(self._hess["col_terms"](np.asarray(eta, float)), dtype=float).ravel()
+        eta = np.asarray(eta, float)
+        g = self._graph(eta)
+        fn = self._cached(g, "col_terms",
+                          lambda: ca.Function("col_terms", [g.eta], [g.col_terms]))
+        cols = np.asarray(fn(eta), dtype=float).ravel()
         bid = self._block_ids(block)
         keep = bid >= 0
         ids, inv = np.unique(bid[keep], return_inverse=True)
@@ -1020,7 +1101,8 @@ class LikelihoodProblem:
 
     def matrices(self, eta) -> dict:
         """Every intermediate matrix at ``eta`` as numpy arrays (continuous, discrete, filter)."""
-        out = self.matrices_fn(eta=np.asarray(eta, float))
+        eta = np.asarray(eta, float)
+        out = self._graph(eta).matrices_fn(eta=eta)
         return {k: np.asarray(ca.densify(v)) for k, v in out.items()}
 
     def inputs(self, eta) -> np.ndarray:
@@ -1106,7 +1188,7 @@ class LikelihoodProblem:
                 f"edges, {self.n} states ({self.n_d} gain states), {len(self.layout)} parameters, "
                 f"{len(self.segments)} segment(s), {self.n_obs} observations, "
                 f"{self.n_restarts} k-step restarts of {self.H} steps, "
-                f"{self.squarings} squarings, chunks {self.L}×{self.M}")
+                f"at most {self.box_squarings} squarings, chunks {self.L}×{self.M}")
 
 
 def _lgamma(x):
