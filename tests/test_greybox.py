@@ -171,6 +171,27 @@ def test_dare_doubling_and_numpy_match_scipy(net5):
     assert np.allclose(m["P"], P_np, rtol=0, atol=1e-10 * scale)   # what the problem uses
 
 
+def test_doubling_stops_when_the_error_left_is_predicted_below_tolerance(net5):
+    # the Riccati and Stein doublings end at the iteration whose quadratic successor is
+    # predicted below the tolerance, not at the one after, that would only confirm it
+    pb, m = _stiff_system(net5)
+    Phi, Q, R, C = m["Phi"], m["Qd"], m["R"], pb.C
+    P, it = kalman.dare_np(Phi, C, Q, R)
+    # tol 0: on until an iteration changes nothing at all
+    P_full, it_full = kalman.dare_np(Phi, C, Q, R, tol=0.0)
+    assert it_full > it
+    assert np.max(np.abs(P - P_full)) <= 1e-13 * np.max(np.abs(P_full))
+    P_one_less, _ = kalman.dare_np(Phi, C, Q, R, tol=0.0, max_iter=it - 1)
+    assert np.max(np.abs(P_one_less - P_full)) > 1e-13 * np.max(np.abs(P_full))
+    S = C @ P @ C.T + R
+    F = Phi - Phi @ np.linalg.solve(S, C @ P).T @ C
+    M = np.random.default_rng(0).normal(size=F.shape)
+    X = kalman.stein_np(F.T, M)
+    ref = sla.solve_discrete_lyapunov(F.T, M)
+    assert np.max(np.abs(X - ref)) < 1e-12 * np.max(np.abs(ref))
+    assert np.max(np.abs(F.T @ X @ F + M - X)) < 1e-14 * np.max(np.abs(X))
+
+
 # ---------------------------------------------------------------------------- likelihood
 def test_kalman_nll_equals_dense_gaussian_log_density():
     rng = np.random.default_rng(0)

@@ -511,6 +511,24 @@ def filter_predict(x, P, Phi, Qd, drift):
 # Stein equation dP = F dP Fᵀ + dΦ P_f Φᵀ + Φ P_f dΦᵀ + dQ + Φ K dR Kᵀ Φᵀ; its adjoint:
 # Λ = Fᵀ Λ F + P̄, then Φ̄ = Λ Φ P_f + Λᵀ Φ P_f, Q̄ = Λ, R̄ = Kᵀ Φᵀ Λ Φ K.
 
+def _converged(change: float, last: float, scale: float, tol: float) -> bool:
+    """Whether a doubling iteration with max-abs change ``change`` (the one before it:
+    ``last``) leaves an error below ``tol·scale``.
+
+    Doubling converges quadratically: near the end the next change is ``K·change²``, and
+    it is the error left. ``K`` is read off the last two changes (``change / last²``). On
+    the twin house N2 the relative changes ran 4.6e-7, 1.9e-9, 4.6e-14, 8e-29: the third
+    is predicted as 3.3e-14 from the first two, so the iteration that only confirmed it
+    (one of 13 on every evaluation) is not made. Predictions are trusted only once the
+    changes fall fast (each below a hundredth of the one before) and are small.
+    """
+    if change <= tol * scale:
+        return True
+    if not (np.isfinite(last) and change <= 1e-6 * scale and change <= 1e-2 * last):
+        return False
+    return (change / last ** 2) * change ** 2 <= tol * scale
+
+
 def dare_np(Phi, C, Q, R, tol: float = 1e-13, max_iter: int = 60):
     """Stationary predicted covariance by doubling (numpy; see :func:`dare_sda`).
 
@@ -524,6 +542,7 @@ def dare_np(Phi, C, Q, R, tol: float = 1e-13, max_iter: int = 60):
     Ak = Phi.T.copy()
     Gk = C.T @ np.linalg.solve(R, C)
     Hk = Q.copy()
+    last = np.inf
     for it in range(1, max_iter + 1):
         W = I + Gk @ Hk
         lu = sla.lu_factor(W)
@@ -536,8 +555,9 @@ def dare_np(Phi, C, Q, R, tol: float = 1e-13, max_iter: int = 60):
         H_new = 0.5 * (H_new + H_new.T)
         change = np.max(np.abs(H_new - Hk))
         Hk = H_new
-        if change <= tol * max(np.max(np.abs(Hk)), 1e-300):
+        if _converged(change, last, max(np.max(np.abs(Hk)), 1e-300), tol):
             return Hk, it
+        last = change
     if not np.all(np.isfinite(Hk)):
         raise FloatingPointError("stationary Riccati solution diverged (is the model detectable?)")
     return Hk, max_iter
@@ -547,12 +567,15 @@ def stein_np(F, M, tol: float = 1e-14, max_iter: int = 64):
     """``X = F X Fᵀ + M`` by doubling (``F`` stable)."""
     X = M.copy()
     Ak = F.copy()
+    last = np.inf
     for _ in range(max_iter):
         dX = Ak @ X @ Ak.T
         X = X + dX
-        Ak = Ak @ Ak
-        if np.max(np.abs(dX)) <= tol * max(np.max(np.abs(X)), 1e-300):
+        change = np.max(np.abs(dX))
+        if _converged(change, last, max(np.max(np.abs(X)), 1e-300), tol):
             break
+        Ak = Ak @ Ak
+        last = change
     return X
 
 
