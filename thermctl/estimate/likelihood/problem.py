@@ -716,7 +716,8 @@ class LikelihoodProblem:
         return 1.1 * np.abs(A).sum(axis=0).max() * self.data.dt
 
     def _setup_graphs(self):
-        """The criteria's CasADi graphs, one per number of squarings (made on first use).
+        """The criteria's CasADi graphs, one per number of squarings (made on first use; the
+        start's at once, so that a problem that cannot be built fails where it is made).
 
         The discretisation's squarings were once set by the parameter box's fastest corner
         (every R̄_v at its lower bound: ‖A‖₁·dt ≈ 5e4 on the twin house N2, 18 squarings),
