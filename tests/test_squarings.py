@@ -95,10 +95,30 @@ def test_value_and_gradient_match_the_box_graph_and_do_not_depend_on_history(cas
     assert f2 == f == f3
     assert np.array_equal(g2, g) and np.array_equal(g3, g)
     assert len(pb._graphs) >= 3
-    # Hessians and block contributions come from the point's own graph as well
+    # the blocks' contributions and their gradients come from the point's own graph too
     ids, parts = pb.block_nll(eta)
     assert abs(parts.sum() - f) < 1e-9 * abs(f)
-    H = pb.hessian(eta)
-    assert np.all(np.isfinite(H)) and H.shape == (len(pb.layout),) * 2
+    scores = pb.block_scores(eta)
+    assert scores.shape == (len(ids), len(pb.layout))
+    assert np.max(np.abs(scores.sum(axis=0) - g)) < 1e-8 * np.max(np.abs(g))
     pb.release_buffers()
     assert pb.nll(eta) == f
+
+
+def test_threads_making_and_using_graphs_get_the_serial_numbers(case):
+    # random points over the whole box, evaluated on three threads by a fresh problem that
+    # makes its graphs as they are asked for: the serial problem's numbers, digit for digit
+    from concurrent.futures import ThreadPoolExecutor
+    net, data, opts = case
+    pb = LikelihoodProblem(net, data, opts)
+    lo, hi = pb.layout.bounds()
+    rng = np.random.default_rng(0)
+    etas = [lo + (hi - lo) * rng.uniform(size=len(lo)) for _ in range(24)]
+    serial = [pb.nll_grad(e) for e in etas]
+    assert len({pb.squarings_at(e) for e in etas}) >= 3
+    other = LikelihoodProblem(net, data, opts)
+    with ThreadPoolExecutor(3) as ex:
+        threaded = list(ex.map(other.nll_grad, etas * 2))
+    for (f, g), (f2, g2) in zip(serial * 2, threaded):
+        assert f == f2 and np.array_equal(g, g2)
+    assert sorted(other._graphs) == sorted(pb._graphs)
