@@ -880,8 +880,7 @@ class LikelihoodProblem:
                       "Theta", "change"]
             + (["P_occ", "S_occ", "Kf_occ", "Qd_occ"] if sched else [])
             + (["P_on", "S_on", "Kf_on", "Qd_on", "Phi_on", "Gamma_on", "Gamma_y"] if loop else []))
-        g.hess = {}
-        g.kstep = g.kstep_buf = g.kstep_grad_buf = None
+        g.cache = {}
         g.kstep_parts = (X, E, (Kf, Kf1) if two else Kf, Phi, Gam, C, ThB_full,
                          (Phi1, Gam1, GamY) if loop else None) if self.n_restarts else None
         return g
@@ -920,17 +919,16 @@ class LikelihoodProblem:
         local problem of the 25-zone corridor); a whole local fit's CPU time did not move
         measurably (6.1–6.7 s before, 6.5–7.0 s after, on a loaded machine).
         """
-        if g.kstep is None and g.kstep_parts is not None:
-            with self._graphs_lock:
-                if g.kstep is None:
-                    J = self._build_kstep(*g.kstep_parts)
-                    g.kstep_buf = BufferedFunction(ca.Function("kstep", [g.eta], [J],
-                                                               ["eta"], ["J"]))
-                    g.kstep_grad_buf = BufferedFunction(ca.Function(
-                        "kstep_grad", [g.eta], [J, ca.densify(ca.gradient(J, g.eta))],
-                        ["eta"], ["J", "grad"]))
-                    g.kstep = J
-        return g.kstep
+        if g.kstep_parts is None:
+            return None
+
+        def make():
+            J = self._build_kstep(*g.kstep_parts)
+            return J, BufferedFunction(ca.Function("kstep", [g.eta], [J], ["eta"], ["J"])), \
+                BufferedFunction(ca.Function("kstep_grad", [g.eta],
+                                             [J, ca.densify(ca.gradient(J, g.eta))],
+                                             ["eta"], ["J", "grad"]))
+        return self._cached(g, "kstep", make)[0]
 
     def _build_kstep(self, X, E, Kf, Phi, Gam, C, ThB_full, on=None):
         LM = self.L * self.M
@@ -985,8 +983,8 @@ class LikelihoodProblem:
     def release_buffers(self) -> None:
         """Free the evaluation buffers (tens of MB); the next evaluation makes them again."""
         for g in list(self._graphs.values()):
-            for buf in [g.nll_buf, g.nll_grad_buf, g.kstep_buf, g.kstep_grad_buf,
-                        *g.hess.values()]:
+            kstep = g.cache.get("kstep", ())
+            for buf in [g.nll_buf, g.nll_grad_buf, *kstep, *g.cache.values()]:
                 if isinstance(buf, BufferedFunction):
                     buf.release()
 
@@ -1001,10 +999,10 @@ class LikelihoodProblem:
     def kstep(self, eta) -> float:
         """k-step criterion: sum of squared errors over horizons 1..H at every restart [K²]."""
         g = self._kstep_graph(eta)
-        return float(g.kstep_buf(eta)[0][0])
+        return float(g.cache["kstep"][1](eta)[0][0])
 
     def kstep_grad(self, eta):
-        f, grad = self._kstep_graph(eta).kstep_grad_buf(eta)
+        f, grad = self._kstep_graph(eta).cache["kstep"][2](eta)
         return float(f[0]), grad
 
     def _kstep_graph(self, eta):
@@ -1020,24 +1018,27 @@ class LikelihoodProblem:
                             f"{self.options.horizon / 3600:g} h)")
 
     def _cached(self, g, key, make):
-        """``g.hess[key]``, made by ``make()`` on first use (once, whichever thread asks)."""
-        f = g.hess.get(key)
+        """``g.cache[key]``, made by ``make()`` on first use (once, whichever thread asks;
+        ``make`` must not ask for another entry: the lock is not re-entrant)."""
+        f = g.cache.get(key)
         if f is None:
             with self._graphs_lock:
-                f = g.hess.get(key)
+                f = g.cache.get(key)
                 if f is None:
-                    f = g.hess[key] = make()
+                    f = g.cache[key] = make()
         return f
 
     def hessian(self, eta, criterion: str = "likelihood") -> np.ndarray:
         """Exact Hessian of the criterion in ``eta`` (built on first use)."""
         g = self._graph(eta) if criterion == "likelihood" else self._kstep_graph(eta)
+        # the criterion before the cache's lock: the k-step one is made under it
+        expr = g.nll if criterion == "likelihood" else self._kstep_of(g)
 
         def make():
-            expr = g.nll if criterion == "likelihood" else g.kstep
             H, _ = ca.hessian(expr, g.eta)
             return ca.Function(f"hess_{criterion}", [g.eta], [H])
-        H = np.asarray(ca.densify(self._cached(g, criterion, make)(np.asarray(eta, float))))
+        fn = self._cached(g, f"hess_{criterion}", make)
+        H = np.asarray(ca.densify(fn(np.asarray(eta, float))))
         return 0.5 * (H + H.T)
 
     def block_scores(self, eta, block: float = 86400.0, threads: int = 1) -> np.ndarray:
