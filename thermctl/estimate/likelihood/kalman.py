@@ -579,7 +579,27 @@ def stein_np(F, M, tol: float = 1e-14, max_iter: int = 64):
     return X
 
 
-class _DareReverse(ca.Callback):
+class _DareArgs:
+    """What the two Riccati callbacks share: their matrices are n×n, but for ``R`` (argument
+    and result 2: ny×ny), and they are read from CasADi's buffers (``eval_buffer``): turning
+    DM arguments into numpy arrays went through nested lists and took 10 % of a twin-house
+    gradient (py-spy)."""
+
+    def _shape(self, i):
+        m = self.ny if i == 2 else self.n
+        return (m, m)
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(*self._shape(i))
+
+    def has_eval_buffer(self):
+        return True
+
+    def _views(self, bufs):
+        return [_view(b, self._shape(i)) for i, b in enumerate(bufs)]
+
+
+class _DareReverse(_DareArgs, ca.Callback):
     def __init__(self, name, C, n, ny, opts):
         ca.Callback.__init__(self)
         self.C, self.n, self.ny = C, n, ny
@@ -591,26 +611,14 @@ class _DareReverse(ca.Callback):
     def get_n_out(self):
         return 3
 
-    def get_sparsity_in(self, i):
-        m = self.ny if i == 2 else self.n
-        return ca.Sparsity.dense(m, m)
-
     def get_sparsity_out(self, i):
-        m = self.ny if i == 2 else self.n
-        return ca.Sparsity.dense(m, m)
-
-    def has_eval_buffer(self):
-        return True
+        return ca.Sparsity.dense(*self._shape(i))       # Φ̄, Q̄ (n×n), R̄ (ny×ny)
 
     def eval_buffer(self, arg, res):
-        # buffers, not DM arguments: turning five n×n DMs into numpy arrays went through
-        # nested lists and took 7 % of a twin-house gradient (py-spy), a third of this step
-        n, ny = self.n, self.ny
-        Phi, Q, R, P, Pb = (_view(a, (ny, ny) if i == 2 else (n, n)) for i, a in enumerate(arg))
         with single_thread_blas():
-            out = self._eval(Phi, Q, R, P, Pb)
-        for r, o in zip(res, out):
-            _view(r, o.shape)[...] = o
+            out = self._eval(*self._views(arg))
+        for r, o in zip(self._views(res), out):
+            r[...] = o
         return 0
 
     def _eval(self, Phi, Q, R, P, Pb):
@@ -624,7 +632,7 @@ class _DareReverse(ca.Callback):
         return [Lam @ Phi @ Pf + Lam.T @ Phi @ Pf, Lam, PhiK.T @ Lam @ PhiK]
 
 
-class DareCallback(ca.Callback):
+class DareCallback(_DareArgs, ca.Callback):
     """``P = dare(Phi, Q, R)`` for a fixed ``C``: numpy doubling, implicit reverse derivative.
 
     Parameters
@@ -647,22 +655,14 @@ class DareCallback(ca.Callback):
     def get_n_out(self):
         return 1
 
-    def get_sparsity_in(self, i):
-        m = self.ny if i == 2 else self.n
-        return ca.Sparsity.dense(m, m)
-
     def get_sparsity_out(self, i):
         return ca.Sparsity.dense(self.n, self.n)
 
-    def has_eval_buffer(self):
-        return True
-
     def eval_buffer(self, arg, res):
-        n, ny = self.n, self.ny
-        Phi, Q, R = (_view(a, (ny, ny) if i == 2 else (n, n)) for i, a in enumerate(arg))
+        Phi, Q, R = self._views(arg)
         with single_thread_blas():
             P, self.n_iter = dare_np(Phi, self.C, 0.5 * (Q + Q.T), 0.5 * (R + R.T))
-        _view(res[0], (n, n))[...] = P
+        _view(res[0], (self.n, self.n))[...] = P
         return 0
 
     def has_reverse(self, nadj):
