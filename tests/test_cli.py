@@ -403,3 +403,28 @@ def test_ctrl_c_inside_a_casadi_callback_stops_the_command_as_ctrl_c_does():
         interrupted()
     with pytest.raises(RuntimeError, match="something else"):
         failed()
+
+
+def test_demo_end_to_end_headline_sets_the_open_loop_beside_the_true_building(tmp_path):
+    """``thermctl demo`` (8 days) runs its four stages and finds the 3 true paths; its
+    headline puts the true building's own open-loop RMSE beside the two models', because
+    on these data the unmeasured gains keep even the truth about 4 K off, and the
+    identified model is as close to it as the truth is."""
+    import re
+    res = run("demo", "--out", tmp_path / "d", "--days", 8)
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert (tmp_path / "d" / "report.html").is_file()
+    m = re.search(r"headline: (\d)/3 true air paths found, (\d+) false; 48-h open-loop RMSE "
+                  r"identified ([\d.]+) K vs conduction-only ([\d.]+) K, the true building "
+                  r"([\d.]+) K \(unmeasured gains\); step-response error at 6 h (\d+) % vs (\d+) %",
+                  text)
+    assert m, text[-600:]
+    found, false, ident, cond, truth, step_i, step_c = m.groups()
+    assert (found, false) == ("3", "0")
+    assert float(truth) > 2.0                       # the gains nobody measured dominate
+    assert abs(float(ident) - float(truth)) <= 0.05
+    assert int(step_i) <= 5 < 40 <= int(step_c)
+    # the headline's truth is the mean of validation.json's per-zone truth column
+    rows = json.loads((tmp_path / "d" / "validation.json").read_text())["open_loop"]
+    assert float(truth) == pytest.approx(np.mean([r["RMSE truth"] for r in rows]), abs=0.006)
