@@ -877,11 +877,19 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
         # model-based selection does for small buildings)
         direction = "backward" if sid is not None and start is None else "both"
         first = cands if direction == "backward" else list(start or ())
-        opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off)
+        if off is None and _decides_gain(opt):
+            # the decision makes this fit first anyway; made here, the search's cold fits
+            # start from it whether or not the input timing was decided
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", BoundWarning)
+                off = _conduction_only_fit(spec, cal, opt)
+        cold = _cold_start(off)
+        opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off,
+                                               cold)
         sel_kw = dict(candidates=cands, direction=direction, margin=opt.selection.margin,
                       start=start or (), swaps="all" if opt.selection.swaps else None,
                       adds=opt.selection.adds, recheck=opt.selection.recheck,
-                      union=opt.selection.union,
+                      union=opt.selection.union, cold_start=cold,
                       **_scorer_options(opt))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
@@ -1319,7 +1327,20 @@ def _scorer_options(opt) -> dict:
                 **_mass_options(opt))
 
 
-def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
+def _decides_gain(opt) -> bool:
+    """Whether :func:`_resolve_fast_gain` fits anything (``fast_gain="auto"``, a likelihood)."""
+    return opt.estimation.fast_gain == "auto" and opt.estimation.criterion != "simulation"
+
+
+def _cold_start(off) -> dict | None:
+    """Start values of the selection's cold fits: the apertures and gain noises of the
+    conduction-only fit ``off`` (None: none was made, the defaults)."""
+    from .estimate.likelihood.scoring import cold_start_from
+    return None if off is None else cold_start_from(off)
+
+
+def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None,
+                              cold_start=None):
     """``(opt, ahead)``: the gain model decided (:func:`_resolve_fast_gain`) and, beside it
     in a second thread, the selection's first fit (the structure ``first``) with the gain
     model the decision is heading for, in a scorer the search adopts when the decision ends
@@ -1327,10 +1348,11 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
 
     The decision fits the conduction-only model with the fast gain, warm from the fit without
     it (made by the input timing decision, or first when there is none); the search's first
-    fit needs its outcome. The fit beside it starts without the fast gain and is replaced by
-    the one with it once a likelihood evaluation of the decision's fit is better by more
-    than the margin: the fit ends at least that low nearly always, and a last check catches
-    the rest. Measured: left out on the twin house (BIC −9.8, after the input timing) and
+    fit needs its outcome, and starts from ``cold_start`` (the search's scorer has the
+    same). The fit beside it starts without the fast gain and is replaced by the one with
+    it once a likelihood evaluation of the decision's fit is better by more than the
+    margin: the fit ends at least that low nearly always, and a last check catches the
+    rest. Measured: left out on the twin house (BIC −9.8, after the input timing) and
     the demo (+14.5); kept on the ring of offices with hourly occupancy (−211), switched
     after 3 evaluations. Guessing "kept" from the start, as before, left the twin house's
     first fit 20 s alone on one core. A wrong guess is stopped at its next likelihood
@@ -1356,7 +1378,7 @@ def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None):
         if guess:
             stopped.extend(guess["scorer"].cancel_ahead(wait_=False))
         o = dataclasses.replace(opt, estimation=dataclasses.replace(est, fast_gain=use))
-        sc = LikelihoodScorer(spec, cal, **_scorer_options(o))
+        sc = LikelihoodScorer(spec, cal, cold_start=cold_start, **_scorer_options(o))
         guess.update(use=use, scorer=sc, future=sc.speculate(cs))
 
     evals = [0]

@@ -125,7 +125,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
                      ahead=None, swaps=None, adds: bool = False, known=None,
                      final=None, recheck: float | None = RECHECK, union: bool = False,
-                     **estimator_kwargs) -> SelectionResult:
+                     cold_start: dict | None = None, **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -211,6 +211,9 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         Fits started ahead (:meth:`LikelihoodScorer.speculate`) with the same options and
         data: the search takes their results instead of fitting again
         (:meth:`LikelihoodScorer.adopt` raises if the options differ).
+    cold_start : dict, optional
+        Start values of the search's cold fits by parameter name (natural units)
+        (:class:`~thermctl.estimate.likelihood.scoring.LikelihoodScorer`).
     **estimator_kwargs
         Passed to every :class:`LikelihoodEstimator` (model options, solver...).
 
@@ -227,7 +230,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     by_name = {c.name: c for c in cands}
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
                               max_iter=max_iter, on_fit=on_fit, min_t=min_t,
-                              predict_t=predict_t, **estimator_kwargs)
+                              predict_t=predict_t, cold_start=cold_start,
+                              **estimator_kwargs)
     if ahead is not None:
         scorer.adopt(ahead)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]
