@@ -222,7 +222,8 @@ class LikelihoodEstimator:
         return pb
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data, init: dict | None = None) -> "LikelihoodEstimator":
+    def fit(self, data, init: dict | None = None,
+            step_scale: dict | None = None) -> "LikelihoodEstimator":
         """Estimate the parameters from data.
 
         Parameters
@@ -230,6 +231,9 @@ class LikelihoodEstimator:
         data : EstimationData, thermctl.data.Measurements or pandas.DataFrame
         init : dict, optional
             Start values by parameter name (natural units), e.g. ``other.params_``.
+        step_scale : dict, optional
+            L-BFGS-B's coordinate scales by parameter name, e.g. ``other.step_scale_`` of
+            the fit ``init`` comes from (:func:`~thermctl.estimate.likelihood.optimize.minimize_criterion`).
 
         Returns
         -------
@@ -255,7 +259,7 @@ class LikelihoodEstimator:
                 with record_warnings() as caught:
                     res = minimize_criterion(pb, self.criterion, eta0, solver=self.solver,
                                              max_iter=self.max_iter, tol=self.tol,
-                                             stall=self.stall)
+                                             stall=self.stall, step_scale=step_scale)
                 tried.append(({"rbar_v": r0}, res.value))
                 if best is None or res.value < best[0].value:
                     best = (res, caught)
@@ -266,6 +270,7 @@ class LikelihoodEstimator:
             self.problem_ = pb
             self.eta_ = res.eta
             self.value_ = res.value
+            self.step_scale_ = res.step_scale
             self.nll_ = res.value if self.criterion == "likelihood" else pb.nll(res.eta)
         self.params_ = lay.values(res.eta)
         rb, cv = pb.rbar_c(res.eta)
