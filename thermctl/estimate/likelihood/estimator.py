@@ -172,6 +172,10 @@ class LikelihoodEstimator:
         Negative log-likelihood at the optimum (also after a k-step fit).
     aic_, bic_ : float
     n_obs_, n_free_ : int
+    step_scale_ : dict or None
+        L-BFGS-B's scale of each free parameter's coordinate at the end (the square root of
+        its last inverse-Hessian diagonal; None after IPOPT): a fit warm-started from this
+        one passes it as ``fit(step_scale=)``.
     result_ : LikelihoodResult
 
     Examples
