@@ -709,8 +709,8 @@ def demo(
     truth_ol = (f", the true building {ol['truth']:.2f} K (unmeasured gains)"
                 if "truth" in ol else "")
     console.print(f"[bold]headline[/]: {len(found & true_edges)}/{len(true_edges)} true air paths "
-                  f"found, {len(found - true_edges)} false; {vr._hours():g}-h open-loop RMSE identified "
-                  f"{ol['identified']:.2f} K vs conduction-only {ol['conduction-only']:.2f} K"
+                  f"found, {len(found - true_edges)} false; {vr._hours():g}-h open-loop RMSE "
+                  f"identified {ol['identified']:.2f} K vs conduction-only {ol['conduction-only']:.2f} K"
                   f"{truth_ol}; step-response error at 6 h "
                   f"{100 * vr.step_errors['identified'][1]:.0f} % vs "
                   f"{100 * vr.step_errors['conduction-only'][1]:.0f} %", highlight=False)

@@ -237,7 +237,8 @@ class LikelihoodEstimator:
             Start values by parameter name (natural units), e.g. ``other.params_``.
         step_scale : dict, optional
             L-BFGS-B's coordinate scales by parameter name, e.g. ``other.step_scale_`` of
-            the fit ``init`` comes from (:func:`~thermctl.estimate.likelihood.optimize.minimize_criterion`).
+            the fit ``init`` comes from
+            (:func:`~thermctl.estimate.likelihood.optimize.minimize_criterion`).
 
         Returns
         -------
