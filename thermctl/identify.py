@@ -818,6 +818,7 @@ def _paper_structure(cal, net, st, notes):
 
 def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification:
     """SIN candidates → backward elimination by BIC → grey-box fit with intervals."""
+    from .estimate.likelihood.scoring import cold_start_from
     from .selection import select_air_paths
     from .structure.search import candidate_pairs
     from .structure.selection import select_edges as rule_edges
@@ -883,7 +884,9 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", BoundWarning)
                 off = _conduction_only_fit(spec, cal, opt)
-        cold = _cold_start(off)
+        # the search's cold fits start from its apertures and gain noises (none made: the
+        # defaults)
+        cold = None if off is None else cold_start_from(off)
         opt, ahead = _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off,
                                                cold)
         sel_kw = dict(candidates=cands, direction=direction, margin=opt.selection.margin,
@@ -1330,13 +1333,6 @@ def _scorer_options(opt) -> dict:
 def _decides_gain(opt) -> bool:
     """Whether :func:`_resolve_fast_gain` fits anything (``fast_gain="auto"``, a likelihood)."""
     return opt.estimation.fast_gain == "auto" and opt.estimation.criterion != "simulation"
-
-
-def _cold_start(off) -> dict | None:
-    """Start values of the selection's cold fits: the apertures and gain noises of the
-    conduction-only fit ``off`` (None: none was made, the defaults)."""
-    from .estimate.likelihood.scoring import cold_start_from
-    return None if off is None else cold_start_from(off)
 
 
 def _gain_model_and_first_fit(spec, cal, opt, notes, progress, first, off=None,
