@@ -500,6 +500,13 @@ class SplitOptions:
         (:func:`thermctl.local.joint_local`); the stability resamples run without it. Off
         by default: on the 49-zone corridor every kept path passed it, the false ones too,
         for 1.8× the CPU (docs/identification.md).
+    rbar_window : float or None
+        A combined air path whose R̄_v is more than this factor from the building's (the
+        median over its kept paths, at least 8 of them) is out
+        (:func:`thermctl.local.rbar_consensus`): one R̄_v for the building, as in the
+        paper, and a path that needs far less conducts more than a door of its length.
+        Measured on the corridor testbed (14 days): docs/scale.md, "One R̄_v for the
+        building". None: no test.
     """
 
     scale: str = "auto"
@@ -516,6 +523,7 @@ class SplitOptions:
     fast_gain: bool = False
     gain_schedule: str | None = None
     joint: bool = False
+    rbar_window: float | None = 2.0
 
     def splits(self, n_measured: int) -> bool:
         """Whether a building of ``n_measured`` measured zones is split into local problems
@@ -532,6 +540,9 @@ class SplitOptions:
         _one_of("split", "gain_schedule", self.gain_schedule, (None, "occupied"))
         if self.workers is not None and self.workers < 1:
             raise DataError(f"identify option split.workers must be >= 1, found {self.workers}")
+        if self.rbar_window is not None and not self.rbar_window > 1:
+            raise DataError(f"identify option split.rbar_window must be a factor above 1 or "
+                            f"None, found {self.rbar_window}")
         if self.latent_depth is not None and self.latent_depth < 1:
             raise DataError(f"identify option split.latent_depth must be >= 1 or None, found "
                             f"{self.latent_depth}")
@@ -963,7 +974,7 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
                         latent_depth=opt.split.latent_depth,
                         candidates=opt.split.candidates, level=opt.structure.level,
                         s_min=opt.structure.s_min, confirm=opt.split.confirm,
-                        joint=opt.split.joint)
+                        joint=opt.split.joint, rbar_window=opt.split.rbar_window)
     return _finish_local(meas, cal, val, opt, li, progress, client)
 
 
@@ -1152,7 +1163,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         for k in local:
             idx = [i for i, o in enumerate(owner) if o == k]
             li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.split.combine,
-                          opt.selection.margin, wall)
+                          opt.selection.margin, wall, opt.split.rbar_window)
             cal, val = splits[k]
             if opt.split.joint:
                 # one building's pairs at a time: its joint problems read its own table

@@ -254,6 +254,10 @@ def identify(
                                      help="Local problems: test every kept air path between "
                                      "two measured zones again in one problem of both ends, "
                                      "both temperatures predicted together."),
+    local_rbar_window: float = typer.Option(
+        _D.split.rbar_window, "--local-rbar-window", help="Local problems: an air path whose "
+        "R̄_v is more than this factor from the building's median (8 paths or more) is out: "
+        "it conducts more (or less) than a door of its length; 0: off."),
     columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
                                  "column), e.g. from `thermctl spec from-brick`."),
 ):
@@ -309,7 +313,8 @@ def identify(
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
-                           confirm=local_confirm, joint=local_joint),
+                           confirm=local_confirm, joint=local_joint,
+                           rbar_window=local_rbar_window or None),
         calibration=_window(calibration, "--calibration"),
         validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:

@@ -1,0 +1,121 @@
+"""One R̄_v for the building: combined local air paths far from the building's median go."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from thermctl.errors import DataError, EstimationError
+from thermctl.identify import EstimationOptions, IdentifyOptions, SplitOptions, identify
+from thermctl.local import (RBAR_WINDOW, EdgeVerdict, LocalResult, assemble, local_problems,
+                            rbar_consensus)
+from thermctl.network import air_path_name
+from thermctl.testbed import corridor_for_zones, generate
+
+
+def _verdict(a, b, rb, d=5.0, kept=True):
+    return EdgeVerdict(a, b, d, kept, {a: -30.0, b: -20.0}, rb, "in by rule 'both': ...")
+
+
+def _building(seed=0):
+    """14 paths whose R̄_v scatter ×0.7–1.4 around 3.3e-4 (as the true paths kept on the
+    196-zone corridor do) and 4 at ×0.2–0.4 of it (as the false ones between offices on one
+    side of a corridor), a path kept without a local R̄_v and one left out."""
+    rng = np.random.default_rng(seed)
+    good = 3.3e-4 * np.exp(rng.uniform(np.log(0.7), np.log(1.4), 14))
+    bad = 3.3e-4 * np.array([0.2, 0.25, 0.3, 0.4])
+    vs = [_verdict(f"n{i:02d}", f"s{i:02d}", float(r)) for i, r in enumerate(good)]
+    vs += [_verdict(f"n{i:02d}", f"n{i + 2:02d}", float(r), d=9.0) for i, r in enumerate(bad)]
+    vs += [_verdict("x0", "x1", float("nan")), _verdict("y0", "y1", float("nan"), kept=False)]
+    return vs, good, bad
+
+
+def test_paths_far_below_the_building_value_go_and_the_median_settles_on_the_rest():
+    vs, good, bad = _building()
+    out, med = rbar_consensus(vs)
+    kept = {v.name for v in out if v.kept}
+    assert kept == {v.name for v in vs[:14]} | {"air:x0-x1"}
+    # the settled value is the median of the paths that share it, not of all 18: the false
+    # ones pull the first median down (to about ×0.9 here)
+    assert med == pytest.approx(math.exp(np.median(np.log(good))), rel=1e-12)
+    first = math.exp(np.median(np.log(np.r_[good, bad])))
+    assert first < 0.95 * med
+    for v, r in zip(out[14:18], bad):
+        assert not v.kept and math.isnan(v.rbar_v)
+        assert f"×{r / med:.2f} the building's" in v.reason and "in by rule 'both'" in v.reason
+        # the conductance it carries against a door of its length at the building's R̄_v
+        assert f"{med / r:.1f}× the conductance" in v.reason and "9.0 m long" in v.reason
+    # the paths that were not judged are as they were
+    assert out[18] == vs[18] and out[19] == vs[19]
+
+
+def test_the_window_is_symmetric_in_log_and_its_edge_is_kept():
+    base = [_verdict(f"a{i}", f"b{i}", 3e-4) for i in range(9)]
+    edge = [_verdict("c0", "d0", 3e-4 / RBAR_WINDOW), _verdict("c1", "d1", 3e-4 * RBAR_WINDOW)]
+    past = [_verdict("e0", "f0", 3e-4 / 2.2), _verdict("e1", "f1", 3e-4 * 2.2)]
+    out, med = rbar_consensus(base + edge + past)
+    assert med == pytest.approx(3e-4)
+    assert [v.kept for v in out[9:]] == [True, True, False, False]
+
+
+def test_too_few_paths_or_no_window_judge_nothing():
+    vs, _, _ = _building()
+    few = vs[:5] + vs[14:16]            # 7 paths with an R̄_v, two of them far below
+    out, med = rbar_consensus(few)
+    assert out == few and math.isnan(med)
+    out, med = rbar_consensus(vs, window=None)
+    assert out == vs and math.isnan(med)
+    for w in (1.0, 0.5):
+        with pytest.raises(EstimationError, match="factor above 1"):
+            rbar_consensus(vs, window=w)
+    with pytest.raises(DataError, match="split.rbar_window"):
+        SplitOptions(rbar_window=1.0).check()
+
+
+def test_assemble_leaves_a_path_out_of_the_model_and_says_why():
+    """On the 49-zone corridor's local problems, with made-up local verdicts: every true
+    path kept at both ends with R̄_v near 3.4e-4, and one same-side pair at a quarter of it."""
+    lay = corridor_for_zones(49, seed=0)
+    probs = local_problems(lay.spec)
+    true = {air_path_name(a, b) for a, b, _ in lay.edges}
+    rng = np.random.default_rng(1)
+    rb = {nm: float(3.4e-4 * np.exp(rng.normal(0.0, 0.15))) for nm in sorted(true)}
+    cand = {air_path_name(a, b) for p in probs for a, b, _ in p.candidates}
+    false = next(nm for nm in sorted(cand - true) if nm[4:6] == nm[10:12] == "f1"
+                 and nm[6] == nm[12] == "n")          # two offices on the north side
+    rb[false] = 0.85e-4
+    res = []
+    for p in probs:
+        mine = [air_path_name(a, b) for a, b, _ in p.candidates]
+        kept = [nm for nm in mine if nm in rb]
+        res.append(LocalResult(p.zone, kept, {nm: (-40.0 if nm in rb else 5.0) for nm in mine},
+                               {nm: rb[nm] for nm in kept}, 2.0, 10))
+    li = assemble(probs, res)
+    assert {air_path_name(a, b) for a, b, _ in li.edges} == true
+    assert false not in li.rbar_v and set(li.rbar_v) == true
+    why = li.reasons[false]
+    assert why.startswith("out by R̄_v: in by rule 'both'") and "×0.2" in why
+    # switched off, the pair is in, as the rule of both ends says
+    off = assemble(probs, res, rbar_window=None)
+    assert {air_path_name(a, b) for a, b, _ in off.edges} == true | {false}
+
+
+@pytest.mark.slow
+def test_on_the_196_zone_corridor_the_test_takes_false_paths_only():
+    """Seed 0, 14 days (benchmarks/scale.py's building): the window takes 10 of the 20 false
+    paths the two ends keep and none of the 32 true ones (session 38)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(building="corridor", zones=196, days=14, seed=0)
+        from thermctl.data import read_measurements
+        meas = read_measurements(tb.data, tb.spec, name="corridor 196")
+        ident = identify(meas, IdentifyOptions(estimation=EstimationOptions(intervals="none"),
+                                               split=SplitOptions(scale="local", workers=2)))
+    true = {air_path_name(a, b) for a, b, _ in tb.truth.edges}
+    dropped = {v.name for v in ident.local.verdicts if v.reason.startswith("out by R̄_v")}
+    kept = {e.name for e in ident.model.network.convection_edges}
+    assert len(dropped) >= 8 and not dropped & true
+    assert len(kept & true) >= 30 and len(kept - true) <= 12
