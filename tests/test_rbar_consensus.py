@@ -119,3 +119,45 @@ def test_on_the_196_zone_corridor_the_test_takes_false_paths_only():
     kept = {e.name for e in ident.model.network.convection_edges}
     assert len(dropped) >= 8 and not dropped & true
     assert len(kept & true) >= 30 and len(kept - true) <= 12
+
+
+def test_settle_searches_the_ends_of_a_path_out_by_rbar_again_without_it():
+    """A 49-zone corridor, 6 days: first-round verdicts made up as in the test above (one
+    same-side pair at a quarter of the building's R̄_v); the two problems at its ends are
+    searched again, for real, without it, and the others keep their results."""
+    from thermctl.data import read_measurements
+    from thermctl.local import OUT_BY_RBAR, settle
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(building="corridor", zones=49, days=6, seed=0)
+        meas = read_measurements(tb.data, tb.spec, name="corridor 49")
+    probs = local_problems(meas.spec, meas.frame.columns)
+    true = {air_path_name(a, b) for a, b, _ in tb.truth.edges}
+    rng = np.random.default_rng(1)
+    rb = {nm: float(3.4e-4 * np.exp(rng.normal(0.0, 0.15))) for nm in sorted(true)}
+    cand = {air_path_name(a, b) for p in probs for a, b, _ in p.candidates}
+    false = next(nm for nm in sorted(cand - true) if nm[4:6] == nm[10:12] == "f1"
+                 and nm[6] == nm[12] == "n")
+    rb[false] = 0.85e-4
+    res = []
+    for p in probs:
+        mine = [air_path_name(a, b) for a, b, _ in p.candidates]
+        kept = [nm for nm in mine if nm in rb]
+        res.append(LocalResult(p.zone, kept, {nm: (-40.0 if nm in rb else 5.0) for nm in mine},
+                               {nm: rb[nm] for nm in kept}, 2.0, 10, cpu=1.0))
+    ends = {false[4:9], false[10:15]}
+    li, probs2, res2 = settle(probs, res, meas.frame, workers=1, margin=10.0, min_t=2.0)
+    again = [i for i, p in enumerate(probs) if p.zone in ends]
+    assert len(again) == 2
+    for i, (p, r) in enumerate(zip(probs2, res2)):
+        if i in again:
+            # searched again, for real, and the path is no longer a candidate there
+            assert false not in {air_path_name(a, b) for a, b, _ in p.candidates}
+            assert r.n_fits > 0 and r.error is None and r is not res[i]
+            assert len(p.candidates) == len(probs[i].candidates) - 1
+        else:
+            assert p is probs[i] and r is res[i]
+    v = next(v for v in li.verdicts if v.name == false)
+    assert not v.kept and v.reason.startswith(OUT_BY_RBAR)
+    assert false not in {air_path_name(a, b) for a, b, _ in li.edges}
+    assert li.cpu > sum(r.cpu for r in res)         # the second searches are counted

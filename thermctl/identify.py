@@ -1116,8 +1116,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
     """
     import time as _time
 
-    from .local import (assemble, confirm_local, joint_local, local_problems, propose_sin,
-                        run_local)
+    from .local import confirm_local, joint_local, local_problems, propose_sin, run_local, settle
 
     opt = options or IdentifyOptions()
     opt.check()
@@ -1162,9 +1161,12 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         out = {}
         for k in local:
             idx = [i for i, o in enumerate(owner) if o == k]
-            li = assemble([problems[i] for i in idx], [results[i] for i in idx], opt.split.combine,
-                          opt.selection.margin, wall, opt.split.rbar_window)
             cal, val = splits[k]
+            li, _, _ = settle([problems[i] for i in idx], [results[i] for i in idx], cal.frame,
+                              rule=opt.split.combine, rbar_window=opt.split.rbar_window,
+                              wall=wall,
+                              workers=opt.split.workers, client=client, progress=progress,
+                              **opt.local_fit_options())
             if opt.split.joint:
                 # one building's pairs at a time: its joint problems read its own table
                 li = joint_local(items[k].spec, cal.frame, li, workers=opt.split.workers,
