@@ -1402,7 +1402,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                    candidates: str = "all", level: float = 0.05,
                    s_min: float = 0.25, min_t: float = 0.0, confirm: bool = False,
                    joint: bool = False, rbar_window: float | None = RBAR_WINDOW,
-                   **options) -> LocalIdentification:
+                   search_again: bool = False, **options) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -1443,9 +1443,10 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         both ends (:func:`joint_local`).
     rbar_window : float or None
         Combined air paths whose R̄_v is more than this factor from the building's median
-        are out (:func:`rbar_consensus`), and their ends' problems are searched again
-        without them (:func:`settle`; with ``confirm``, not tested again) [-]; None: no
-        test.
+        are out (:func:`rbar_consensus`) [-]; None: no test.
+    search_again : bool
+        The problems at the ends of the paths out by R̄_v are searched again without them
+        (:func:`settle`; with ``confirm``, not tested again).
     **options
         Other :class:`thermctl.estimate.likelihood.LikelihoodOptions` fields of the local
         fits (``internal_mass``...).
@@ -1471,10 +1472,14 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         results = confirm_local(problems, results, frame, workers=workers, client=client,
                                 progress=progress, criterion=criterion, margin=margin,
                                 solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
-    li, _, _ = settle(problems, results, frame, rule=rule, margin=margin,
-                      rbar_window=rbar_window, wall=time.perf_counter() - t0, workers=workers,
-                      client=client, progress=progress, criterion=criterion, solar=solar,
-                      fit_rows=fit_rows, min_t=min_t, **options)
+    if search_again:
+        li, _, _ = settle(problems, results, frame, rule=rule, margin=margin,
+                          rbar_window=rbar_window, wall=time.perf_counter() - t0,
+                          workers=workers, client=client, progress=progress,
+                          criterion=criterion, solar=solar, fit_rows=fit_rows, min_t=min_t,
+                          **options)
+    else:
+        li = assemble(problems, results, rule, margin, time.perf_counter() - t0, rbar_window)
     if joint:
         li = joint_local(spec, frame, li, workers=workers, client=client, progress=progress,
                          parallel=parallel, latent_depth=latent_depth, criterion=criterion,

@@ -258,6 +258,10 @@ def identify(
         _D.split.rbar_window, "--local-rbar-window", help="Local problems: an air path whose "
         "R̄_v is more than this factor from the building's median (8 paths or more) is out: "
         "it conducts more (or less) than a door of its length; 0: off."),
+    local_search_again: bool = typer.Option(
+        _D.split.search_again, "--local-search-again/--no-local-search-again",
+        help="Local problems: search the ends of the air paths out by R̄_v again without "
+        "them (a path that was there may have kept a true partner out)."),
     columns: Path = typer.Option(None, "--columns", help="Column map (YAML, BAS column: thermctl "
                                  "column), e.g. from `thermctl spec from-brick`."),
 ):
@@ -314,7 +318,8 @@ def identify(
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
                            confirm=local_confirm, joint=local_joint,
-                           rbar_window=local_rbar_window or None),
+                           rbar_window=local_rbar_window or None,
+                           search_again=local_search_again),
         calibration=_window(calibration, "--calibration"),
         validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:
