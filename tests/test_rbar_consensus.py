@@ -164,3 +164,31 @@ def test_settle_searches_the_ends_of_a_path_out_by_rbar_again_without_it():
     assert not v.kept and v.reason.startswith(OUT_BY_RBAR)
     assert false not in {air_path_name(a, b) for a, b, _ in li.edges}
     assert li.cpu > sum(r.cpu for r in res)         # the second searches are counted
+
+
+def test_identify_says_which_paths_are_out_by_rbar():
+    """The note of a local identification names the paths put out and their ratio."""
+    from thermctl.identify import _rbar_window_note
+    lay = corridor_for_zones(49, seed=0)
+    probs = local_problems(lay.spec)
+    true = sorted(air_path_name(a, b) for a, b, _ in lay.edges)
+    rb = {nm: 3.4e-4 for nm in true}
+    cand = {air_path_name(a, b) for p in probs for a, b, _ in p.candidates}
+    false = next(nm for nm in sorted(cand - set(true)) if nm[6] == nm[12] == "n")
+    rb[false] = 0.85e-4
+    res = []
+    for p in probs:
+        mine = [air_path_name(a, b) for a, b, _ in p.candidates]
+        kept = [nm for nm in mine if nm in rb]
+        res.append(LocalResult(p.zone, kept, {nm: -40.0 for nm in kept},
+                               {nm: rb[nm] for nm in kept}, 2.0, 10))
+    li = assemble(probs, res)
+    assert li.rbar_v_building == pytest.approx(3.4e-4) and li.rbar_window == RBAR_WINDOW
+    notes = []
+    _rbar_window_note(li, notes)
+    assert len(notes) == 1
+    assert "1 air path(s) both ends kept are out" in notes[0]
+    assert f"{false} (×0.25)" in notes[0] and "0.00034 K/(W m)" in notes[0]
+    notes = []
+    _rbar_window_note(assemble(probs, res, rbar_window=None), notes)
+    assert notes == []

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -1010,6 +1011,25 @@ def _lost_data_note(reasons, kept: set, notes: list) -> None:
                  f"gaps in the data: {said}. More (or gap-free) days would settle them.")
 
 
+def _rbar_window_note(li, notes) -> None:
+    """One note on the air paths :func:`thermctl.local.rbar_consensus` put out, if any."""
+    from .local import OUT_BY_RBAR
+    out = [v for v in li.verdicts if v.reason.startswith(OUT_BY_RBAR)]
+    if not out or not np.isfinite(li.rbar_v_building):
+        return
+    med = li.rbar_v_building
+    def ratio(v):           # the verdict of a path put out keeps its local value in words
+        m = re.search(r"is ×([0-9.]+) the building's", v.reason)
+        return f" (×{m.group(1)})" if m else ""
+    said = ", ".join(f"{v.name}{ratio(v)}" for v in out[:12])
+    notes.append(f"one R̄_v for the building: {len(out)} air path(s) both ends kept are out, "
+                 f"their local R̄_v more than ×{li.rbar_window:g} from the building's "
+                 f"{med:.3g} K/(W m) (the median of the {len(li.edges)} kept): a path that "
+                 f"needs far less conducts more than a door of its length and stands in for "
+                 f"something else — {said}{', ...' if len(out) > 12 else ''} "
+                 f"(--local-rbar-window; why per path: identification.json local.verdicts)")
+
+
 def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identification:
     """The model of combined local results: whole-building refit when small enough."""
     from .local import combine_zone_params
@@ -1029,6 +1049,7 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
     _lost_data_note(((k, f"{r.zone}: {v}") for r in li.results
                      for k, v in (r.reasons or {}).items()),
                     {air_path_name(a, b) for a, b, _ in li.edges}, notes)
+    _rbar_window_note(li, notes)
     failed = [r for r in li.results if r.error]
     if failed:
         notes.append(f"{len(failed)} local problem(s) failed, their air paths are undecided: "

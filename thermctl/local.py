@@ -1324,6 +1324,11 @@ class LocalIdentification:
     ua_factor : dict
         Wall class → combined UA factor of the local fits [-] (:func:`combine_ua_factors`);
         empty without ``wall_factors``.
+    rbar_v_building : float
+        The building's R̄_v that :func:`rbar_consensus` judged the paths by [K/(W m)]; NaN
+        when it judged none.
+    rbar_window : float or None
+        Its factor [-].
     """
 
     problems: list
@@ -1336,6 +1341,8 @@ class LocalIdentification:
     time: float
     cpu: float
     ua_factor: dict = field(default_factory=dict)
+    rbar_v_building: float = float("nan")
+    rbar_window: float | None = None
 
     @property
     def reasons(self) -> dict:
@@ -1493,14 +1500,14 @@ def assemble(problems, results, rule: str = "both", margin: float = 10.0,
     """A :class:`LocalIdentification` from fitted local problems (:func:`combine`, then
     :func:`rbar_consensus` with ``rbar_window``, and the combined parameters); ``wall`` is
     the wall time it took [s]."""
-    verdicts, _ = rbar_consensus(combine(problems, results, rule, margin), rbar_window)
+    verdicts, med = rbar_consensus(combine(problems, results, rule, margin), rbar_window)
     edges = [(v.a, v.b, v.d) for v in verdicts if v.kept]
     rb = {v.name: v.rbar_v for v in verdicts if v.kept}
     taus = [r.tau0 for r in results if math.isfinite(r.tau0)]
     tau0 = float(np.median(taus)) if taus else float("nan")
     return LocalIdentification(problems, results, verdicts, edges, rb, tau0, rule, wall,
                                float(sum(r.cpu for r in results)),
-                               combine_ua_factors(results))
+                               combine_ua_factors(results), med, rbar_window)
 
 
 def _zone_of(name: str):
