@@ -77,14 +77,13 @@ def test_too_few_paths_or_no_window_judge_nothing():
         SplitOptions(search_again="no").check()
 
 
-def test_assemble_leaves_a_path_out_of_the_model_and_says_why():
-    """On the 49-zone corridor's local problems, with made-up local verdicts: every true
-    path kept at both ends with R̄_v near 3.4e-4, and one same-side pair at a quarter of it."""
-    lay = corridor_for_zones(49, seed=0)
-    probs = local_problems(lay.spec)
-    true = {air_path_name(a, b) for a, b, _ in lay.edges}
+def _made_up(probs, true_edges, spread=0.15):
+    """Local results on real local problems, made up: every true path kept at both ends with
+    R̄_v near 3.4e-4 (log-normal, ``spread``), and one pair of north offices on floor 1 at a
+    quarter of it; every other candidate out. Returns (results, that pair's name)."""
+    true = {air_path_name(a, b) for a, b, *_ in true_edges}
     rng = np.random.default_rng(1)
-    rb = {nm: float(3.4e-4 * np.exp(rng.normal(0.0, 0.15))) for nm in sorted(true)}
+    rb = {nm: float(3.4e-4 * np.exp(rng.normal(0.0, spread))) for nm in sorted(true)}
     cand = {air_path_name(a, b) for p in probs for a, b, _ in p.candidates}
     false = next(nm for nm in sorted(cand - true) if nm[4:6] == nm[10:12] == "f1"
                  and nm[6] == nm[12] == "n")          # two offices on the north side
@@ -94,7 +93,16 @@ def test_assemble_leaves_a_path_out_of_the_model_and_says_why():
         mine = [air_path_name(a, b) for a, b, _ in p.candidates]
         kept = [nm for nm in mine if nm in rb]
         res.append(LocalResult(p.zone, kept, {nm: (-40.0 if nm in rb else 5.0) for nm in mine},
-                               {nm: rb[nm] for nm in kept}, 2.0, 10))
+                               {nm: rb[nm] for nm in kept}, 2.0, 10, cpu=1.0))
+    return res, false
+
+
+def test_assemble_leaves_a_path_out_of_the_model_and_says_why():
+    """On the 49-zone corridor's local problems, with made-up local verdicts (_made_up)."""
+    lay = corridor_for_zones(49, seed=0)
+    probs = local_problems(lay.spec)
+    true = {air_path_name(a, b) for a, b, _ in lay.edges}
+    res, false = _made_up(probs, lay.edges)
     li = assemble(probs, res)
     assert {air_path_name(a, b) for a, b, _ in li.edges} == true
     assert false not in li.rbar_v and set(li.rbar_v) == true
@@ -135,19 +143,7 @@ def test_settle_searches_the_ends_of_a_path_out_by_rbar_again_without_it():
         tb = generate(building="corridor", zones=49, days=6, seed=0)
         meas = read_measurements(tb.data, tb.spec, name="corridor 49")
     probs = local_problems(meas.spec, meas.frame.columns)
-    true = {air_path_name(a, b) for a, b, _ in tb.truth.edges}
-    rng = np.random.default_rng(1)
-    rb = {nm: float(3.4e-4 * np.exp(rng.normal(0.0, 0.15))) for nm in sorted(true)}
-    cand = {air_path_name(a, b) for p in probs for a, b, _ in p.candidates}
-    false = next(nm for nm in sorted(cand - true) if nm[4:6] == nm[10:12] == "f1"
-                 and nm[6] == nm[12] == "n")
-    rb[false] = 0.85e-4
-    res = []
-    for p in probs:
-        mine = [air_path_name(a, b) for a, b, _ in p.candidates]
-        kept = [nm for nm in mine if nm in rb]
-        res.append(LocalResult(p.zone, kept, {nm: (-40.0 if nm in rb else 5.0) for nm in mine},
-                               {nm: rb[nm] for nm in kept}, 2.0, 10, cpu=1.0))
+    res, false = _made_up(probs, tb.truth.edges)
     ends = {false[4:9], false[10:15]}
     li, probs2, res2 = settle(probs, res, meas.frame, workers=1, margin=10.0, min_t=2.0)
     again = [i for i, p in enumerate(probs) if p.zone in ends]
@@ -171,17 +167,7 @@ def test_identify_says_which_paths_are_out_by_rbar():
     from thermctl.identify import _rbar_window_note
     lay = corridor_for_zones(49, seed=0)
     probs = local_problems(lay.spec)
-    true = sorted(air_path_name(a, b) for a, b, _ in lay.edges)
-    rb = {nm: 3.4e-4 for nm in true}
-    cand = {air_path_name(a, b) for p in probs for a, b, _ in p.candidates}
-    false = next(nm for nm in sorted(cand - set(true)) if nm[6] == nm[12] == "n")
-    rb[false] = 0.85e-4
-    res = []
-    for p in probs:
-        mine = [air_path_name(a, b) for a, b, _ in p.candidates]
-        kept = [nm for nm in mine if nm in rb]
-        res.append(LocalResult(p.zone, kept, {nm: -40.0 for nm in kept},
-                               {nm: rb[nm] for nm in kept}, 2.0, 10))
+    res, false = _made_up(probs, lay.edges, spread=0.0)
     li = assemble(probs, res)
     assert li.rbar_v_building == pytest.approx(3.4e-4) and li.rbar_window == RBAR_WINDOW
     notes = []
