@@ -1018,6 +1018,7 @@ def _rbar_window_note(li, notes) -> None:
     if not out or not np.isfinite(li.rbar_v_building):
         return
     med = li.rbar_v_building
+
     def ratio(v):           # the verdict of a path put out keeps its local value in words
         m = re.search(r"is ×([0-9.]+) the building's", v.reason)
         return f" (×{m.group(1)})" if m else ""

@@ -1186,8 +1186,9 @@ def rbar_consensus(verdicts, window: float | None = RBAR_WINDOW,
     is the median over the kept paths, taken again over the paths within ``window`` of it
     until it settles (false paths pull it down); a path outside ``[m/window, m·window]``
     is out. Measured on the 196-zone corridor testbed (14 days, seed 0): the 32 true paths
-    kept lie within ×0.55–1.6 of the median, 10 of the 20 false ones below ×0.5, 15 of them
-    between offices on one side of a corridor (docs/scale.md, "One R̄_v for the building").
+    kept lie within ×0.55–1.6 of the median; of the 20 false ones, 15 join two offices on
+    one side of a corridor and 10 lie below ×0.5 (docs/scale.md, "One R̄_v for the
+    building").
 
     Parameters
     ----------
@@ -1243,8 +1244,9 @@ def settle(problems, results, frame, *, rule: str = "both",
 
     A path that conducts more than a door of its length (:func:`rbar_consensus`) was a
     candidate of its ends' searches, and there it may have kept a true partner out (on the
-    196-zone corridor testbed, 5 of the 21 paths out by R̄_v share a zone with a missed
-    true path: a neighbour on the same side in place of the office across the corridor).
+    196-zone corridor testbed, seeds 0 and 1, 6 of the 20 false paths out by R̄_v share a
+    zone with a missed true path: a neighbour on the same side in place of the office
+    across the corridor).
     Those problems are searched once more without the paths that are out, and the verdicts
     combined again (and judged by R̄_v again, with no further search).
 
