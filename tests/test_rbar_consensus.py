@@ -178,3 +178,10 @@ def test_identify_says_which_paths_are_out_by_rbar():
     notes = []
     _rbar_window_note(assemble(probs, res, rbar_window=None), notes)
     assert notes == []
+
+
+def test_a_path_put_out_carries_its_ratio():
+    vs, good, bad = _building()
+    out, med = rbar_consensus(vs)
+    assert [v.rbar_ratio for v in out[14:18]] == pytest.approx(list(bad / med), rel=1e-12)
+    assert all(math.isnan(v.rbar_ratio) for v in out[:14] + out[18:])

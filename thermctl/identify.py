@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -1018,11 +1017,7 @@ def _rbar_window_note(li, notes) -> None:
     if not out or not np.isfinite(li.rbar_v_building):
         return
     med = li.rbar_v_building
-
-    def ratio(v):           # the verdict of a path put out keeps its local value in words
-        m = re.search(r"is ×([0-9.]+) the building's", v.reason)
-        return f" (×{m.group(1)})" if m else ""
-    said = ", ".join(f"{v.name}{ratio(v)}" for v in out[:12])
+    said = ", ".join(f"{v.name} (×{v.rbar_ratio:.2f})" for v in out[:12])
     notes.append(f"one R̄_v for the building: {len(out)} air path(s) both ends kept are out, "
                  f"their local R̄_v more than ×{li.rbar_window:g} from the building's "
                  f"{med:.3g} K/(W m) (the median of the {len(li.edges)} kept): a path that "

@@ -1083,6 +1083,9 @@ class EdgeVerdict:
     rbar_v : float
         Combined R̄_v [K/(W m)] (NaN if not kept).
     reason : str
+    rbar_ratio : float
+        Of a path :func:`rbar_consensus` put out: its combined R̄_v over the building's
+        [-]; NaN otherwise.
     """
 
     a: str
@@ -1092,6 +1095,7 @@ class EdgeVerdict:
     evidence: dict
     rbar_v: float
     reason: str
+    rbar_ratio: float = float("nan")
 
     @property
     def name(self) -> str:
@@ -1230,7 +1234,7 @@ def rbar_consensus(verdicts, window: float | None = RBAR_WINDOW,
                             f"×{ratio:.2f} the building's {med:.3g} (median of {len(inside)} "
                             f"kept air paths), outside ×{1 / window:.2g}–{window:g}: "
                             f"{1 / ratio:.1f}× the conductance 1/(R̄_v·d) of a door "
-                            f"{v.d:.1f} m long, so it stands in for something else")
+                            f"{v.d:.1f} m long, so it stands in for something else", ratio)
         out.append(v)
     return out, med
 
