@@ -40,6 +40,8 @@ Columns:
   the model's per-edge value (or its shared value after a whole-building refit);
   ``loc R̄v err``: the same for the local problems' combined per-edge R̄_v
   (``LocalIdentification.rbar_v``, before any whole-building refit);
+* ``out R̄v``: air paths both ends kept that the R̄_v window put out
+  (:func:`thermctl.local.rbar_consensus`), and how many of them are true;
 * ``note``: failed local problems, or the exception of a failed run.
 
 With ``--global-too`` buildings of at most 13 zones also get a ``scale="global"`` row
@@ -78,6 +80,7 @@ import numpy as np
 
 from thermctl.data import read_measurements
 from thermctl.identify import EstimationOptions, IdentifyOptions, SplitOptions, identify
+from thermctl.local import OUT_BY_RBAR
 from thermctl.testbed import generate
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -125,6 +128,8 @@ class Row:
     true_paths: list = field(default_factory=list)
     group: str = ""
     failed_problems: int = 0
+    out_rbar: int | None = None
+    out_rbar_true: int = 0
     note: str = ""
 
     @property
@@ -264,6 +269,9 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
                 for p in (_pair(a, b) for a, b, _ in li.edges)
                 if p in true and math.isfinite(li.rbar_v.get(f"air:{p[0]}-{p[1]}", math.nan))]
         row.rbar_err_local = float(np.median(errs)) if errs else math.nan
+        out = [v for v in li.verdicts if v.reason.startswith(OUT_BY_RBAR)]
+        row.out_rbar = len(out)
+        row.out_rbar_true = sum(1 for v in out if _pair(v.a, v.b) in true)
         row.failed_problems = sum(1 for r in li.results if r.error)
         if row.failed_problems:
             row.note = f"{row.failed_problems} local problem(s) failed"
@@ -305,6 +313,8 @@ COLUMNS = [  # header, width, cell(row)
     ("f/10z", 5, lambda r: _f(r.false_per_10, "{:.2f}") if r.ok else "—"),
     ("R̄v err", 7, lambda r: _f(100 * r.rbar_err, "{:.1f}%")),
     ("loc R̄v err", 11, lambda r: _f(100 * r.rbar_err_local, "{:.1f}%")),
+    ("out R̄v", 6, lambda r: "—" if r.out_rbar is None else
+     f"{r.out_rbar}" + (f" ({r.out_rbar_true} true)" if r.out_rbar_true else "")),
     ("note", 4, lambda r: r.note),
 ]
 
