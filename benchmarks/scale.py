@@ -80,7 +80,6 @@ import numpy as np
 
 from thermctl.data import read_measurements
 from thermctl.identify import EstimationOptions, IdentifyOptions, SplitOptions, identify
-from thermctl.local import OUT_BY_RBAR
 from thermctl.testbed import generate
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -269,7 +268,7 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
                 for p in (_pair(a, b) for a, b, _ in li.edges)
                 if p in true and math.isfinite(li.rbar_v.get(f"air:{p[0]}-{p[1]}", math.nan))]
         row.rbar_err_local = float(np.median(errs)) if errs else math.nan
-        out = [v for v in li.verdicts if v.reason.startswith(OUT_BY_RBAR)]
+        out = [v for v in li.verdicts if v.out_by_rbar]
         row.out_rbar = len(out)
         row.out_rbar_true = sum(1 for v in out if _pair(v.a, v.b) in true)
         row.failed_problems = sum(1 for r in li.results if r.error)

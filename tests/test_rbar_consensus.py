@@ -145,6 +145,10 @@ def test_settle_searches_the_ends_of_a_path_out_by_rbar_again_without_it():
     probs = local_problems(meas.spec, meas.frame.columns)
     res, false = _made_up(probs, tb.truth.edges)
     ends = {false[4:9], false[10:15]}
+    # again=False: assemble alone, nothing searched
+    li0, probs0, res0 = settle(probs, res, meas.frame, again=False, margin=10.0)
+    assert all(a is b for a, b in zip(res0, res)) and all(a is b for a, b in zip(probs0, probs))
+    assert false not in li0.rbar_v and next(v for v in li0.verdicts if v.name == false).out_by_rbar
     li, probs2, res2 = settle(probs, res, meas.frame, workers=1, margin=10.0, min_t=2.0)
     again = [i for i, p in enumerate(probs) if p.zone in ends]
     assert len(again) == 2
@@ -185,6 +189,7 @@ def test_a_path_put_out_carries_its_ratio():
     out, med = rbar_consensus(vs)
     assert [v.rbar_ratio for v in out[14:18]] == pytest.approx(list(bad / med), rel=1e-12)
     assert all(math.isnan(v.rbar_ratio) for v in out[:14] + out[18:])
+    assert [v.out_by_rbar for v in out] == [False] * 14 + [True] * 4 + [False] * 2
 
 
 @pytest.mark.parametrize("args, window, again", [

@@ -1012,15 +1012,14 @@ def _lost_data_note(reasons, kept: set, notes: list) -> None:
 
 def _rbar_window_note(li, notes) -> None:
     """One note on the air paths :func:`thermctl.local.rbar_consensus` put out, if any."""
-    from .local import OUT_BY_RBAR
-    out = [v for v in li.verdicts if v.reason.startswith(OUT_BY_RBAR)]
+    out = [v for v in li.verdicts if v.out_by_rbar]
     if not out or not np.isfinite(li.rbar_v_building):
         return
     med = li.rbar_v_building
     said = ", ".join(f"{v.name} (×{v.rbar_ratio:.2f})" for v in out[:12])
     notes.append(f"one R̄_v for the building: {len(out)} air path(s) both ends kept are out, "
                  f"their local R̄_v more than ×{li.rbar_window:g} from the building's "
-                 f"{med:.3g} K/(W m) (the median of the {len(li.edges)} kept): a path that "
+                 f"{med:.3g} K/(W m) (the median of the kept paths): a path that "
                  f"needs far less conducts more than a door of its length and stands in for "
                  f"something else — {said}{', ...' if len(out) > 12 else ''} "
                  f"(--local-rbar-window; why per path: identification.json local.verdicts)")
@@ -1140,8 +1139,7 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
     """
     import time as _time
 
-    from .local import (assemble, confirm_local, joint_local, local_problems, propose_sin,
-                        run_local, settle)
+    from .local import confirm_local, joint_local, local_problems, propose_sin, run_local, settle
 
     opt = options or IdentifyOptions()
     opt.check()
@@ -1187,15 +1185,11 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
         for k in local:
             idx = [i for i, o in enumerate(owner) if o == k]
             cal, val = splits[k]
-            ps, rs = [problems[i] for i in idx], [results[i] for i in idx]
-            if opt.split.search_again:
-                li, _, _ = settle(ps, rs, cal.frame, rule=opt.split.combine,
-                                  rbar_window=opt.split.rbar_window, wall=wall,
-                                  workers=opt.split.workers, client=client, progress=progress,
-                                  **opt.local_fit_options())
-            else:
-                li = assemble(ps, rs, opt.split.combine, opt.selection.margin, wall,
-                              opt.split.rbar_window)
+            li, _, _ = settle([problems[i] for i in idx], [results[i] for i in idx], cal.frame,
+                              rule=opt.split.combine, rbar_window=opt.split.rbar_window,
+                              again=opt.split.search_again, wall=wall,
+                              workers=opt.split.workers, client=client, progress=progress,
+                              **opt.local_fit_options())
             if opt.split.joint:
                 # one building's pairs at a time: its joint problems read its own table
                 li = joint_local(items[k].spec, cal.frame, li, workers=opt.split.workers,

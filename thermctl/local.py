@@ -1101,6 +1101,11 @@ class EdgeVerdict:
     def name(self) -> str:
         return air_path_name(self.a, self.b)
 
+    @property
+    def out_by_rbar(self) -> bool:
+        """Whether :func:`rbar_consensus` put the path out."""
+        return math.isfinite(self.rbar_ratio)
+
 
 def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list[EdgeVerdict]:
     """Join the local verdicts on every candidate air path.
@@ -1240,11 +1245,11 @@ def rbar_consensus(verdicts, window: float | None = RBAR_WINDOW,
 
 
 def settle(problems, results, frame, *, rule: str = "both",
-           rbar_window: float | None = RBAR_WINDOW, wall: float = float("nan"),
-           workers: int | None = None, client=None, progress=None,
-           **kwargs) -> tuple[LocalIdentification, list, list]:
-    """:func:`assemble`, and the local problems at the ends of the paths out by R̄_v
-    searched again without them.
+           rbar_window: float | None = RBAR_WINDOW, again: bool = True,
+           wall: float = float("nan"), workers: int | None = None, client=None,
+           progress=None, **kwargs) -> tuple[LocalIdentification, list, list]:
+    """:func:`assemble`, and (``again``) the local problems at the ends of the paths out by
+    R̄_v searched again without them.
 
     A path that conducts more than a door of its length (:func:`rbar_consensus`) was a
     candidate of its ends' searches, and there it may have kept a true partner out (on the
@@ -1262,6 +1267,8 @@ def settle(problems, results, frame, *, rule: str = "both",
         Calibration data.
     rule, rbar_window, wall
         As :func:`assemble`.
+    again : bool
+        Search the ends again; False: :func:`assemble` alone.
     workers, client, progress, **kwargs
         As :func:`run_local` (``margin`` also :func:`assemble`'s).
 
@@ -1275,10 +1282,10 @@ def settle(problems, results, frame, *, rule: str = "both",
     from dataclasses import replace
     margin = kwargs.get("margin", 10.0)
     li = assemble(problems, results, rule, margin, wall, rbar_window)
-    out = {v.name: v for v in li.verdicts if v.reason.startswith(OUT_BY_RBAR)}
-    again = [i for i, p in enumerate(problems)
-             if any(air_path_name(a, b) in out for a, b, _ in p.candidates)]
-    if not again:
+    out = {v.name: v for v in li.verdicts if v.out_by_rbar} if again else {}
+    ends = [i for i, p in enumerate(problems)
+            if any(air_path_name(a, b) in out for a, b, _ in p.candidates)]
+    if not ends:
         return li, list(problems), list(results)
     t0, c0 = time.perf_counter(), li.cpu
 
@@ -1288,13 +1295,13 @@ def settle(problems, results, frame, *, rule: str = "both",
 
     problems, results = list(problems), list(results)
     redo = [replace(problems[i], candidates=without(problems[i].candidates),
-                    proposed=without(problems[i].proposed)) for i in again]
+                    proposed=without(problems[i].proposed)) for i in ends]
     log.info("%d air path(s) out by R̄_v; the local problems of %s searched again without them",
              len(out), ", ".join(p.zone for p in redo))
     got = run_local(redo, frame, workers=workers, client=client, progress=progress,
                     stage=f"local problems again ({len(out)} air path"
                           f"{'s' if len(out) != 1 else ''} out by R̄_v)", **kwargs)
-    for i, p, r in zip(again, redo, got):
+    for i, p, r in zip(ends, redo, got):
         problems[i], results[i] = p, r
     li2 = assemble(problems, results, rule, margin, wall + time.perf_counter() - t0,
                    rbar_window)
@@ -1485,14 +1492,10 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
         results = confirm_local(problems, results, frame, workers=workers, client=client,
                                 progress=progress, criterion=criterion, margin=margin,
                                 solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
-    if search_again:
-        li, _, _ = settle(problems, results, frame, rule=rule, margin=margin,
-                          rbar_window=rbar_window, wall=time.perf_counter() - t0,
-                          workers=workers, client=client, progress=progress,
-                          criterion=criterion, solar=solar, fit_rows=fit_rows, min_t=min_t,
-                          **options)
-    else:
-        li = assemble(problems, results, rule, margin, time.perf_counter() - t0, rbar_window)
+    li, _, _ = settle(problems, results, frame, rule=rule, rbar_window=rbar_window,
+                      again=search_again, wall=time.perf_counter() - t0, workers=workers,
+                      client=client, progress=progress, criterion=criterion, margin=margin,
+                      solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
     if joint:
         li = joint_local(spec, frame, li, workers=workers, client=client, progress=progress,
                          parallel=parallel, latent_depth=latent_depth, criterion=criterion,
