@@ -89,6 +89,7 @@ GAIN_SCHEDULE = SplitOptions().gain_schedule    # --gain-schedule
 JOINT = SplitOptions().joint                    # --joint
 LOOP_GAIN = EstimationOptions().loop_gain        # --loop-gain
 LOCAL_ROWS = SplitOptions().rows                 # --local-rows
+MIN_T_DAYS = SplitOptions().min_t_days           # --local-min-t-days
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -222,7 +223,7 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
                           split=SplitOptions(scale=scale, workers=workers,
                                              candidates=LOCAL_CANDIDATES,
                                              gain_schedule=GAIN_SCHEDULE, joint=JOINT,
-                                             rows=LOCAL_ROWS))
+                                             rows=LOCAL_ROWS, min_t_days=MIN_T_DAYS))
     last = {"t": 0.0}
     t_start = time.perf_counter()
 
@@ -471,8 +472,13 @@ def main(argv=None) -> Result:
                     help="split.rows: the samples whose innovations count in the local "
                          f"likelihoods (default {LOCAL_ROWS})")
     ap.add_argument("--save", action="store_true", help=f"write {RESULTS.name}/scale.txt")
+    ap.add_argument("--local-min-t-days", type=float, default=MIN_T_DAYS, metavar="D",
+                    help="split.min_t_days: the calibration days the local daily-gain t test "
+                         f"is for, longer records ask t·√(days/D) (default {MIN_T_DAYS:g}; "
+                         "0: the same t on any record)")
     args = ap.parse_args(argv)
     globals()["LOCAL_ROWS"] = args.local_rows
+    globals()["MIN_T_DAYS"] = args.local_min_t_days or None
     globals()["JOINT"] = args.joint
     globals()["LOOP_GAIN"] = args.loop_gain
     globals()["LOCAL_CANDIDATES"] = args.local_candidates
@@ -497,7 +503,8 @@ def main(argv=None) -> Result:
     out(f"thermctl @ {_git_head()}, {time.strftime('%Y-%m-%d %H:%M')}, "
         f"seed{'s' if len(seeds) > 1 else ''} {' '.join(map(str, seeds))}, "
         f"{args.days:g} generated days (last quarter held back), 5-min data; "
-        f"identify(scale=..., workers=N, intervals='none'); OMP_NUM_THREADS="
+        f"identify(scale=..., workers=N, intervals='none', split.min_t_days={MIN_T_DAYS}); "
+        f"OMP_NUM_THREADS="
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}")
     out()
     rows = []

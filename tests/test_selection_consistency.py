@@ -27,7 +27,7 @@ def _fitted(day_nll):
 
 def _scorer(min_t):
     sc = LikelihoodScorer.__new__(LikelihoodScorer)   # no data needed for consistent()
-    sc.min_t, sc.block, sc.test = min_t, 86400.0, None
+    sc.min_t, sc.min_t_days, sc.block, sc.test = min_t, None, 86400.0, None
     sc.predict_t, sc.predict_horizon = None, 6 * 3600.0
     return sc
 
@@ -254,7 +254,7 @@ def test_block_prediction_errors_add_up_to_kstep_errors(pugh_fits):
 def test_true_air_path_predicts_better_day_after_day(pugh_fits):
     small, big = pugh_fits
     sc = LikelihoodScorer.__new__(LikelihoodScorer)
-    sc.min_t, sc.block, sc.test = 0.0, 86400.0, None
+    sc.min_t, sc.min_t_days, sc.block, sc.test = 0.0, None, 86400.0, None
     sc.predict_t, sc.predict_horizon = 2.0, 6 * 3600.0
     ok, _, note = sc.consistent(small, big)
     assert ok, note

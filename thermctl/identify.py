@@ -479,6 +479,15 @@ class SplitOptions:
         corridor testbed (14 days, seed 0): 25 zones 11/11 true paths and 7 false at 0,
         9/11 and 2 at 2; 49 zones 12/13 and 12 false at 0, 11/13 and 1 at 2 (and 38 % less
         CPU). 0: reported, not required.
+    min_t_days : float or None
+        The calibration record ``min_t`` is asked of [days]: on D longer records the t
+        statistic must reach ``min_t·√(D / min_t_days)``, the same daily gain against its
+        day-to-day spread (:func:`thermctl.estimate.likelihood.scoring.required_t`). A
+        path that stands in for what a local model lacks gains a fixed amount per day, and
+        its t grows as √D: on the 49-zone corridor (seeds 0–3) 28 days (21 calibration
+        days) kept 50/52 true paths and 27 false with a fixed ``min_t`` 2, 47/52 and 6 with
+        this (docs/scale.md, "Longer records"). 10: the record ``min_t`` 2 was measured on
+        (14 days). None: ``min_t`` on any record.
     confirm : bool
         With ``combine="both"``: an air path kept at one end only is tested at the other
         end, added alone to what that end kept, and that end votes by the test
@@ -524,6 +533,7 @@ class SplitOptions:
     refit_max_states: int = 150
     latent_depth: int | None = 1
     min_t: float = 2.0
+    min_t_days: float | None = 10.0
     confirm: bool = False
     fast_gain: bool = False
     gain_schedule: str | None = None
@@ -540,6 +550,9 @@ class SplitOptions:
         _one_of("split", "scale", self.scale, ("auto", "global", "local"))
         if not self.min_t >= 0:
             raise DataError(f"identify option split.min_t must be >= 0, found {self.min_t}")
+        if self.min_t_days is not None and not self.min_t_days > 0:
+            raise DataError(f"identify option split.min_t_days must be > 0 [days] or None, "
+                            f"found {self.min_t_days}")
         _one_of("split", "candidates", self.candidates, ("all", "sin"))
         _one_of("split", "combine", self.combine, ("sum", "both", "either"))
         _one_of("split", "rows", self.rows, ("auto", "all", "supply_off"))
@@ -646,7 +659,8 @@ class IdentifyOptions:
         return dict(criterion=self.selection.criterion, margin=self.selection.margin,
                     solar=est.solar, internal_mass=est.internal_mass,
                     wall_factors=est.wall_factors, fit_rows=split.rows, min_t=split.min_t,
-                    innovations=est.innovations, fast_gain=split.fast_gain,
+                    min_t_days=split.min_t_days, innovations=est.innovations,
+                    fast_gain=split.fast_gain,
                     **({"gain_schedule": split.gain_schedule} if split.gain_schedule else {}),
                     **({"loop_gain": True} if est.loop_gain else {}))
 

@@ -125,7 +125,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      min_t: float = 0.0, predict_t: float | None = None, workers: int = 1,
                      ahead=None, swaps=None, adds: bool = False, known=None,
                      final=None, recheck: float | None = RECHECK, union: bool = False,
-                     cold_start: dict | None = None, **estimator_kwargs) -> SelectionResult:
+                     cold_start: dict | None = None, min_t_days: float | None = None,
+                     **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
     Parameters
@@ -179,6 +180,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     min_t : float
         An edge's gain must also hold day by day: the t statistic of its daily likelihood
         gains (:meth:`LikelihoodScorer.consistent`) [-]; 0: off.
+    min_t_days : float or None
+        The record ``min_t`` is for [days]; on longer records the t statistic must grow as
+        √days (:func:`~thermctl.estimate.likelihood.scoring.required_t`). None: ``min_t``
+        on any record.
     predict_t : float or None
         And in prediction: the t statistic of its daily reduction of the 6-h-ahead
         prediction error (:meth:`LikelihoodScorer.consistent`) [-]; None: not tested.
@@ -231,7 +236,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
                               max_iter=max_iter, on_fit=on_fit, min_t=min_t,
                               predict_t=predict_t, cold_start=cold_start,
-                              **estimator_kwargs)
+                              min_t_days=min_t_days, **estimator_kwargs)
     if ahead is not None:
         scorer.adopt(ahead)
     start = [by_name.get(_cand(spec, e).name, _cand(spec, e)) for e in start]
@@ -265,7 +270,8 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
 
 
 def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: float = 10.0,
-                   min_t: float = 0.0, max_iter: int = 200, **estimator_kwargs) -> dict:
+                   min_t: float = 0.0, max_iter: int = 200, min_t_days: float | None = None,
+                   **estimator_kwargs) -> dict:
     """Test air paths one at a time against a fixed structure.
 
     ``kept`` is fitted once; each of ``tests`` is added to it alone and fitted (warm
@@ -287,6 +293,8 @@ def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: 
         [-]; 0: reported, not required.
     max_iter : int
         Per fit.
+    min_t_days : float or None
+        As :func:`select_air_paths`.
     **estimator_kwargs
         Passed to every :class:`LikelihoodEstimator`.
 
@@ -297,7 +305,7 @@ def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: 
         adding it [-], the daily-gain t [-], a few words, its fitted R̄_v [K/(W m)].
     """
     scorer = LikelihoodScorer(spec, data, criterion, max_iter=max_iter, min_t=min_t,
-                              **estimator_kwargs)
+                              min_t_days=min_t_days, **estimator_kwargs)
     cur = as_candidates(spec, list(kept)) if kept else []
     base, val = scorer.fit(cur)
     out = {}

@@ -246,6 +246,12 @@ def identify(
                                       "daily-gain t statistic an air path must reach (a "
                                       "neighbour sharing the zone's disturbances passes BIC "
                                       "but not day after day); 0: off."),
+    local_min_t_days: float = typer.Option(_D.split.min_t_days, "--local-min-t-days", min=0,
+                                           help="Local problems: the calibration days "
+                                           "--local-min-t is for; on D more days the t must "
+                                           "reach it times sqrt(D / this), the same daily gain "
+                                           "against its spread. 0: --local-min-t on any "
+                                           "record."),
     local_confirm: bool = typer.Option(_D.split.confirm, "--local-confirm/--no-local-confirm",
                                        help="Local problems, --combine both: test an air path "
                                        "kept at one end only at its other end (a greedy search "
@@ -317,7 +323,8 @@ def identify(
         split=SplitOptions(scale=scale, workers=workers, scheduler=scheduler, combine=combine,
                            rows=local_rows, candidates=local_candidates,
                            latent_depth=latent_depth, min_t=local_min_t,
-                           confirm=local_confirm, joint=local_joint,
+                           min_t_days=local_min_t_days or None, confirm=local_confirm,
+                           joint=local_joint,
                            rbar_window=local_rbar_window or None,
                            search_again=local_search_again),
         calibration=_window(calibration, "--calibration"),
