@@ -134,3 +134,25 @@ def test_cli_option_reaches_the_split_options(tmp_path, monkeypatch, args, days)
                                    str(tmp_path / "out"), *args])
     assert "split" in seen, res.output
     assert seen["split"].min_t_days == days
+
+
+def test_identify_says_what_t_a_long_record_asked():
+    """The note gives the t the local problems asked (2·√(21/10) = 2.90 on 21 days), and is
+    not written on the record min_t is for, or with the scaling off."""
+    from types import SimpleNamespace
+
+    from thermctl.identify import _min_t_days_note
+
+    def li(days):
+        why = (f"added: bic -40.0 when added, daily gain t 3.5 (needs "
+               f"{required_t(2.0, days, 10.0):g}), better on 9 of {days} days")
+        return SimpleNamespace(results=[SimpleNamespace(reasons={"air:a-b": why,
+                                                                 "air:a-c": "out: screened"})])
+    notes = []
+    _min_t_days_note(li(21), SplitOptions(), notes)
+    assert len(notes) == 1 and "on 21 calibration days" in notes[0] and "t 2.90" in notes[0]
+    for days, split in ((10, SplitOptions()), (21, SplitOptions(min_t_days=None)),
+                        (21, SplitOptions(min_t=0.0))):
+        notes = []
+        _min_t_days_note(li(days), split, notes)
+        assert notes == []

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import warnings
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -1039,6 +1041,30 @@ def _rbar_window_note(li, notes) -> None:
                  f"(--local-rbar-window; why per path: identification.json local.verdicts)")
 
 
+def _min_t_days_note(li, split, notes) -> None:
+    """One note when the local daily-gain test asked more than ``split.min_t`` (a record
+    longer than ``split.min_t_days``), with the t it asked."""
+    from .estimate.likelihood.scoring import required_t
+
+    if not split.min_t or split.min_t_days is None:
+        return
+    days = Counter(int(m) for r in li.results for why in r.reasons.values()
+                   for m in re.findall(r"daily gain t [-\d.]+ \(needs [\d.e+]+\), better on "
+                                       r"\d+ of (\d+) days", why))
+    if not days:
+        return
+    d = days.most_common(1)[0][0]
+    if d <= split.min_t_days:
+        return
+    need = required_t(split.min_t, d, split.min_t_days)
+    notes.append(f"local daily-gain test: on {d} calibration days an air path's gain had to "
+                 f"reach t {need:.2f}, not {split.min_t:g}: --local-min-t {split.min_t:g} is for "
+                 f"{split.min_t_days:g} days, and a longer record asks the same daily gain "
+                 f"against its day-to-day spread, since a path that stands in for a shared "
+                 f"disturbance gains a fixed amount per day and its t grows as √days "
+                 f"(--local-min-t-days; 0: t {split.min_t:g} on any record)")
+
+
 def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identification:
     """The model of combined local results: whole-building refit when small enough."""
     from .local import combine_zone_params
@@ -1059,6 +1085,7 @@ def _finish_local(meas, cal, val, opt, li, progress, client=None) -> Identificat
                      for k, v in (r.reasons or {}).items()),
                     {air_path_name(a, b) for a, b, _ in li.edges}, notes)
     _rbar_window_note(li, notes)
+    _min_t_days_note(li, opt.split, notes)
     failed = [r for r in li.results if r.error]
     if failed:
         notes.append(f"{len(failed)} local problem(s) failed, their air paths are undecided: "
