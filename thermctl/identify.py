@@ -487,7 +487,7 @@ class SplitOptions:
         day-to-day spread (:func:`thermctl.estimate.likelihood.scoring.required_t`). A
         path that stands in for what a local model lacks gains a fixed amount per day, and
         its t grows as √D: on the 49-zone corridor (seeds 0–3) 28 days (21 calibration
-        days) kept 50/52 true paths and 27 false with a fixed ``min_t`` 2, 47/52 and 6 with
+        days) kept 50/52 true paths and 27 false with a fixed ``min_t`` 2, 48/52 and 6 with
         this (docs/scale.md, "Longer records"). 10: the record ``min_t`` 2 was measured on
         (14 days). None: ``min_t`` on any record.
     confirm : bool

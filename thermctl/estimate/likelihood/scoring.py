@@ -509,7 +509,7 @@ def required_t(min_t: float, days: int, min_t_days: float | None = None) -> floa
     loop acting between samples) gains a fixed amount per day, and its ``t`` grows as √D.
     Measured on the 49-zone corridor testbed (seeds 0–3, local problems, ``min_t`` 2): 14
     days (10 calibration days) 41/52 true paths and 4 false, 28 days (21) 50/52 and 27
-    false; with ``min_t_days`` 10 on 28 days (t ≥ 2.9) 47/52 and 6 false.
+    false; with ``min_t_days`` 10 on 28 days (t ≥ 2.9) 48/52 and 6 false.
 
     Examples
     --------
