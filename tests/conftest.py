@@ -197,3 +197,36 @@ def docs_snippets(tmp_path, monkeypatch):
             exec(compile(code, f"docs/{page}", "exec"), ns)
         return ns
     return run
+
+
+@pytest.fixture
+def identify_split(tmp_path, monkeypatch):
+    """``split(*args)``: the ``split`` options ``thermctl identify`` builds from these
+    command-line arguments on a 4-day testbed (identify itself replaced by a stand-in that
+    keeps its options)."""
+    import warnings
+
+    from typer.testing import CliRunner
+
+    import thermctl.identify as ident_mod
+    from thermctl.cli import app
+    from thermctl.testbed import generate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        generate(days=4, seed=0).write(tmp_path)
+    seen = {}
+
+    def stand_in(meas, opt, progress=None):
+        seen["split"] = opt.split
+        raise RuntimeError("stand-in: options seen")
+
+    monkeypatch.setattr(ident_mod, "identify", stand_in)
+
+    def split(*args):
+        seen.clear()
+        res = CliRunner().invoke(app, ["identify", str(tmp_path / "data.csv"), "-b",
+                                       str(tmp_path / "building.yaml"), "-o",
+                                       str(tmp_path / "out"), *args])
+        assert "split" in seen, res.output
+        return seen["split"]
+    return split

@@ -112,28 +112,9 @@ def test_a_local_search_asks_the_scaled_t_of_every_path_it_keeps(corridor):
 
 @pytest.mark.parametrize("args, days", [([], 10.0), (["--local-min-t-days", "21"], 21.0),
                                         (["--local-min-t-days", "0"], None)])
-def test_cli_option_reaches_the_split_options(tmp_path, monkeypatch, args, days):
-    """``thermctl identify --local-min-t-days D`` (0: off) sets ``split.min_t_days``;
-    identify itself is replaced by a stand-in that keeps the options."""
-    from typer.testing import CliRunner
-
-    import thermctl.identify as ident_mod
-    from thermctl.cli import app
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        generate(days=4, seed=0).write(tmp_path)
-    seen = {}
-
-    def stand_in(meas, opt, progress=None):
-        seen["split"] = opt.split
-        raise RuntimeError("stand-in: options seen")
-
-    monkeypatch.setattr(ident_mod, "identify", stand_in)
-    res = CliRunner().invoke(app, ["identify", str(tmp_path / "data.csv"), "-b",
-                                   str(tmp_path / "building.yaml"), "-o",
-                                   str(tmp_path / "out"), *args])
-    assert "split" in seen, res.output
-    assert seen["split"].min_t_days == days
+def test_cli_option_reaches_the_split_options(identify_split, args, days):
+    """``thermctl identify --local-min-t-days D`` (0: off) sets ``split.min_t_days``."""
+    assert identify_split(*args).min_t_days == days
 
 
 def test_identify_says_what_t_a_long_record_asked():

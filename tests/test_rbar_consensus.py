@@ -197,25 +197,8 @@ def test_a_path_put_out_carries_its_ratio():
     (["--local-rbar-window", "0"], None, False),
     (["--local-rbar-window", "3", "--local-search-again"], 3.0, True),
 ])
-def test_cli_options_reach_the_split_options(tmp_path, monkeypatch, args, window, again):
+def test_cli_options_reach_the_split_options(identify_split, args, window, again):
     """``thermctl identify`` hands --local-rbar-window (0: off) and --local-search-again to
-    ``split``; identify itself is replaced by a stand-in that keeps the options."""
-    from typer.testing import CliRunner
-
-    import thermctl.identify as ident_mod
-    from thermctl.cli import app
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        generate(days=4, seed=0).write(tmp_path)
-    seen = {}
-
-    def stand_in(meas, opt, progress=None):
-        seen["split"] = opt.split
-        raise RuntimeError("stand-in: options seen")
-
-    monkeypatch.setattr(ident_mod, "identify", stand_in)
-    res = CliRunner().invoke(app, ["identify", str(tmp_path / "data.csv"), "-b",
-                                   str(tmp_path / "building.yaml"), "-o",
-                                   str(tmp_path / "out"), *args])
-    assert "split" in seen, res.output
-    assert seen["split"].rbar_window == window and seen["split"].search_again is again
+    ``split``."""
+    split = identify_split(*args)
+    assert split.rbar_window == window and split.search_again is again
