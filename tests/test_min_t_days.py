@@ -98,6 +98,8 @@ def test_a_local_search_asks_the_scaled_t_of_every_path_it_keeps(corridor):
     texts = " ".join(strict.reasons.values())
     days = {int(m) for m in re.findall(r"better on \d+ of (\d+) days", texts)}
     assert len(days) == 1, texts
+    # the result's own count of the days the test compared is the one its reasons give
+    assert strict.days == plain.days == next(iter(days)) == 8, (strict.days, days)
     need = required_t(2.0, days.pop(), 1.0)
     assert need > 4.5
     assert f"(needs {need:g})" in texts
@@ -123,12 +125,14 @@ def test_identify_says_what_t_a_long_record_asked():
     from types import SimpleNamespace
 
     from thermctl.identify import _min_t_days_note
+    from thermctl.local import LocalResult
 
     def li(days):
-        why = (f"added: bic -40.0 when added, daily gain t 3.5 (needs "
-               f"{required_t(2.0, days, 10.0):g}), better on 9 of {days} days")
-        return SimpleNamespace(results=[SimpleNamespace(reasons={"air:a-b": why,
-                                                                 "air:a-c": "out: screened"})])
+        # a problem without candidates (no search: days 0) does not count
+        return SimpleNamespace(results=[
+            LocalResult("a", ["air:a-b"], {}, {}, 1.0, 10, days=days),
+            LocalResult("b", ["air:a-b"], {}, {}, 1.0, 10, days=days),
+            LocalResult("c", [], {}, {}, float("nan"), 10)])
     notes = []
     _min_t_days_note(li(21), SplitOptions(), notes)
     assert len(notes) == 1 and "on 21 calibration days" in notes[0] and "t 2.90" in notes[0]

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 import warnings
 from collections import Counter
 from dataclasses import asdict, dataclass, field
@@ -1048,9 +1047,7 @@ def _min_t_days_note(li, split, notes) -> None:
 
     if not split.min_t or split.min_t_days is None:
         return
-    days = Counter(int(m) for r in li.results for why in r.reasons.values()
-                   for m in re.findall(r"daily gain t [-\d.]+ \(needs [\d.e+]+\), better on "
-                                       r"\d+ of (\d+) days", why))
+    days = Counter(r.days for r in li.results if r.days)
     if not days:
         return
     d = days.most_common(1)[0][0]

@@ -423,6 +423,8 @@ class LocalResult:
     at_bounds : list of str
         Which of ``params`` ended on a search bound (``"sigma_v[r1] at its lower bound
         0.0001 [K]"``).
+    days : int
+        Days of data the search's daily-gain test compared (0 without a search) [-].
     """
 
     zone: str
@@ -441,6 +443,7 @@ class LocalResult:
     confirmed: dict = field(default_factory=dict)
     params: dict = field(default_factory=dict)
     at_bounds: list = field(default_factory=list)
+    days: int = 0
 
 
 # groups a local fit shares over its zones (``noise="shared"``) that belong to one zone of
@@ -599,7 +602,7 @@ def fit_local(problem: LocalProblem, frame, *, criterion: str = "bic", margin: f
     return LocalResult(problem.zone, kept, evidence, rb, tau0, n_states, int(est.n_obs_),
                        n_fits, time.perf_counter() - t0, time.process_time() - c0,
                        dict(sel.reasons), ua_factor=ua, params=zone_params(problem, est.params_),
-                       at_bounds=_renamed_bounds(problem, est))
+                       at_bounds=_renamed_bounds(problem, est), days=sel.days)
 
 
 def _wall_factors(options) -> bool:

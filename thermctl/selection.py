@@ -51,6 +51,8 @@ class SelectionResult:
         The search's fit of the selected structure and its last removal trials
         (:attr:`~thermctl.structure.search.SearchResult.trials`), for a search that starts
         from these edges (``select_air_paths(known=...)``).
+    days : int
+        Days of data the daily-gain test compared (the D of its t statistic) [-].
     """
 
     edges: list
@@ -63,6 +65,7 @@ class SelectionResult:
     time: float
     n_fits: int
     trials: dict = field(default_factory=dict, repr=False)
+    days: int = 0
 
     def summary(self) -> str:
         lines = [f"model-based edge selection ({self.criterion}): {len(self.edges)} edge(s) "
@@ -266,7 +269,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
         scorer.count_fit()                  # counted and shown like the search's fits
     return SelectionResult([x.pair + (x.d,) for x in cur], res.candidates, res.path, res.reasons,
                            criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits,
-                           res.trials)
+                           res.trials, est.problem_.n_blocks(scorer.block))
 
 
 def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: float = 10.0,

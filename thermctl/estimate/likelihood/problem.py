@@ -1081,6 +1081,12 @@ class LikelihoodProblem:
         per = max(1, int(round(block / self.data.dt)))
         return np.where((self.tmap >= 0) & (self.mask > 0), self.tmap // per, -1)
 
+    def n_blocks(self, block: float = 86400.0) -> int:
+        """How many time blocks of ``block`` seconds hold observations that count (the D of
+        the daily-gain test, :meth:`LikelihoodScorer.consistent`) [-]."""
+        bid = self._block_ids(block)
+        return int(np.unique(bid[bid >= 0]).size)
+
     def block_nll(self, eta, block: float = 86400.0) -> tuple[np.ndarray, np.ndarray]:
         """The likelihood's contributions of consecutive time blocks (as :meth:`block_scores`).
 
