@@ -44,12 +44,15 @@ from thermctl.data import read_measurements  # noqa: E402
 from thermctl.rc import homogeneous_split  # noqa: E402
 from thermctl.spec import is_outdoor, spec_from_dict  # noqa: E402
 from thermctl.structure.search import _cand  # noqa: E402
+from thermctl.testbed import SensorNoise  # noqa: E402
 
 #: ISO 6946 surface resistances [m² K/W] and the films' largest share of a wall's resistance
 #: (the finite-volume plant's, thermctl.testbed.fdplant)
 R_SI, R_SE, FILM_MAX = 0.13, 0.04, 0.6
 
 ARRIVALS = dict(gains="arrivals")
+# the model is the plant but for the gains and the sensors
+CLEAN = dict(ARRIVALS, walls="types", neighbour_noise=0.0, plant="rc-exact")
 # name: (generate() changes, spec "films" or None, scorer option changes)
 ROWS = {
     "default": ({}, None, {}),
@@ -67,8 +70,17 @@ ROWS = {
     "arrivals, 3R2C plant, walls exact": (dict(ARRIVALS, plant="rc-exact", wall_spec="plant"),
                                           None, {}),
     "arrivals, no neighbour noise": (dict(ARRIVALS, neighbour_noise=0.0), None, {}),
-    "arrivals, walls by type, no neighbour noise, 3R2C plant": (
-        dict(ARRIVALS, walls="types", neighbour_noise=0.0, plant="rc-exact"), None, {}),
+    "arrivals, walls by type, no neighbour noise, 3R2C plant": (CLEAN, None, {}),
+    "arrivals, clean, perfect sensors": (dict(CLEAN, noise=None), None, {}),
+    "arrivals, clean, no sensor offsets": (dict(CLEAN, noise=SensorNoise(T_bias_sd=0.0)), None,
+                                           {}),
+    "arrivals, clean, exact flow gains": (dict(CLEAN, noise=SensorNoise(flow_gain_sd=0.0)),
+                                          None, {}),
+    "arrivals, clean, only the zone sensors' noise and rounding": (
+        dict(CLEAN, noise=SensorNoise(T_bias_sd=0.0, Ts_sd=0.0, flow_sd=0.0, flow_gain_sd=0.0,
+                                      flow_quantum_cfm=0.0, solar_sd=0.0)), None, {}),
+    "arrivals, clean, zone sensors exact": (
+        dict(CLEAN, noise=SensorNoise(T_sd=0.0, T_bias_sd=0.0, quantum_F=0.0)), None, {}),
     "films": ({}, "films", {}),
     "arrivals, films": (ARRIVALS, "films", {}),
     "arrivals, 3R2C plant, films": (dict(ARRIVALS, plant="rc-exact"), "films", {}),
