@@ -45,10 +45,9 @@ from thermctl.rc import homogeneous_split  # noqa: E402
 from thermctl.spec import is_outdoor, spec_from_dict  # noqa: E402
 from thermctl.structure.search import _cand  # noqa: E402
 from thermctl.testbed import SensorNoise  # noqa: E402
-
-#: ISO 6946 surface resistances [m² K/W] and the films' largest share of a wall's resistance
-#: (the finite-volume plant's, thermctl.testbed.fdplant)
-R_SI, R_SE, FILM_MAX = 0.13, 0.04, 0.6
+# ISO 6946 surface resistances [m² K/W] and the films' largest share of a wall's resistance:
+# the finite-volume plant's own
+from thermctl.testbed.fdplant import FILM_MAX, R_SE, R_SI  # noqa: E402
 
 ARRIVALS = dict(gains="arrivals")
 # the model is the plant but for the gains and the sensors
