@@ -306,6 +306,8 @@ def main(argv=None):
                     help="identify's --no-adds (case names get ' [no adds]'; session 22's rows "
                          "named ' [adds]' were run when additions were an option: --table "
                          "shows them as the default)")
+    ap.add_argument("--schedule-check", action="store_true",
+                    help="identify's --schedule-check (case names get ' [schedule check]')")
     ap.add_argument("--union", action="store_true",
                     help="identify's --union (case names get ' [union]')")
     ap.add_argument("--per-edge", action="store_true",
@@ -413,6 +415,9 @@ def main(argv=None):
         if args.union:
             sel["union"] = True
             name += " [union]"
+        if args.schedule_check:
+            sel["schedule_check"] = True
+            name += " [schedule check]"
         if args.recheck is not None:
             sel["recheck"] = args.recheck or None
             name += f" [recheck {args.recheck:g}]"

@@ -185,6 +185,16 @@ class SelectionOptions:
         the selection leaves it out on at least 40 % of the resamples.
     stability_seed : int
         Seed of the resamples.
+    schedule_check : bool
+        Whole-building fits with a likelihood criterion: after the selection (and the misfit
+        check), a backward pass from the kept air paths under the gain schedule
+        (``estimation.gain_schedule="occupied"``: the zones' random-walk gains wander faster
+        in the occupied hours); a path whose removal costs that model less than ``margin``
+        goes, and the model is the schedule's fit of what stays. Hourly presence feeds false
+        paths through the weekend's daytime samples, which the default gain takes as much
+        at face value as the night's; the schedule says they are worth less
+        (docs/identification.md, "A gain schedule as a check"). Off by default; it
+        needs time stamps.
     """
 
     method: str = "auto"
@@ -201,6 +211,7 @@ class SelectionOptions:
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0
+    schedule_check: bool = False
 
     def check(self):
         _one_of("selection", "method", self.method, SELECTIONS)
@@ -217,7 +228,7 @@ class SelectionOptions:
                 and not isinstance(self.misfit_ratio, bool) and self.misfit_ratio >= 0):
             raise DataError(f"identify option selection.misfit_ratio must be a number >= 0 "
                             f"(0: off), found {self.misfit_ratio!r}")
-        for name in ("swaps", "adds", "union"):
+        for name in ("swaps", "adds", "union", "schedule_check"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise DataError(f"identify option selection.{name} must be True or False, "
                                 f"found {getattr(self, name)!r}")
@@ -626,6 +637,13 @@ class IdentifyOptions:
         if self.selection.stability and self.selection_method == "scores":
             raise DataError("identify: selection.stability needs the model-based selection "
                             "(selection.method='model' with a Kalman criterion)")
+        if self.selection.schedule_check and (self.selection_method == "scores"
+                                              or self.estimation.gain_schedule is not None
+                                              or self.estimation.loop_gain):
+            raise DataError("identify: selection.schedule_check needs the model-based "
+                            "selection with a Kalman criterion, without "
+                            "estimation.gain_schedule (the selection's own model then has "
+                            "the schedule) or estimation.loop_gain (two regimes each)")
         local = self.split.scale == "local"
         if local and self.selection_method == "scores":
             raise DataError("identify: split.scale='local' needs the model-based selection "
@@ -933,6 +951,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                                    final_per_edge=_per_edge_set(opt.estimation),
                                    workers=_threads(opt), ahead=ahead, **sel_kw)
             chk = _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress)
+            if opt.selection.schedule_check:
+                chk, opt = _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress)
             sel, wald, per_edge = chk.sel, chk.wald, chk.per_edge
         if opt.selection.stability:
             from .stability import stability_selection
@@ -1942,6 +1962,79 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         notes.append(_per_path_note(pe_values, shown, lim))
     return _Checked(out, (gb, wald) if not gone and out.estimator is gb else None, True,
                     per_edge, shared, list(sel.edges))
+
+
+def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
+    """The selection after the gain-schedule check (``selection.schedule_check``), and the
+    options with ``estimation.gain_schedule="occupied"``: the model is the schedule's fit.
+
+    A backward pass from the kept air paths (no swaps or additions) on the likelihood whose
+    random-walk gains wander ``occ_ratio`` times faster in the occupied hours; a path whose
+    removal costs that model less than ``margin`` goes. Left as it was, said in the notes,
+    when there is nothing to check or the pass fails (no time stamps, a failed fit).
+    """
+    from dataclasses import replace
+
+    from .selection import select_air_paths
+    from .structure.search import SelectionStep
+
+    sel = chk.sel
+    if not sel.edges or opt.selection.criterion == "holdout" or \
+            getattr(sel.estimator, "criterion", None) != "likelihood":
+        return chk, opt
+    sched = replace(opt, estimation=replace(opt.estimation, gain_schedule="occupied"))
+    n = len(sel.edges)
+    head = (f"gain-schedule check: a backward pass from the {n} kept air path"
+            f"{'s' if n > 1 else ''} with gains that wander faster in the occupied hours")
+
+    def say(msg):
+        logger.info("gain-schedule check: %s", msg)
+
+    def on_fit(k):
+        if progress:
+            progress(f"gain-schedule check fits ({n} air paths)", k, None)
+
+    say(head.split(": ", 1)[1])
+    kw = dict(sel_kw, candidates=list(sel.edges), direction="backward", start=(), swaps=None,
+              adds=False, union=False, gain_schedule="occupied")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BoundWarning)
+            new = select_air_paths(spec, cal, progress=say, on_fit=on_fit,
+                                   final_criterion=opt.estimation.criterion,
+                                   final_per_edge=chk.per_edge, workers=_threads(opt), **kw)
+    except (DataError, EstimationError, np.linalg.LinAlgError) as exc:
+        # a second opinion: its failure leaves the selection and its model as they were
+        notes.append(f"{head}: not run ({exc}); the selection stands unchecked")
+        return chk, opt
+    kept = {air_path_name(a, b) for a, b, _ in new.edges}
+    gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
+    reasons = dict(sel.reasons)
+    for k, why in new.reasons.items():
+        reasons[k] = f"{reasons[k]}; gain-schedule check: {why}" if k in reasons else why
+    start = new.path[0]
+    path = sel.path + [SelectionStep("check", None, start.value, 0.0, start.edges,
+                                     note=head + " (criterion values of that model)")]
+    path += new.path[1:]
+    out = type(sel)(new.edges, sel.candidates, path, reasons, sel.criterion, new.estimator,
+                    new.per_edge, sel.time + new.time, sel.n_fits + new.n_fits, new.trials,
+                    new.days)
+    said = (f"removed {', '.join(gone)} (each worth less than {opt.selection.margin:g} in "
+            "BIC once the daytime gains may wander faster)" if gone else "every one stays")
+    if new.edges:
+        said += (f"; the model is that fit (occupied-hours gain noise intensity "
+                 f"×{_occ_ratio(new.estimator):.2g})")
+    notes.append(f"{head}: {said}.")
+    het = None if chk.per_edge else _path_heterogeneity(new.trials, out, sched)
+    out.trials = {}
+    # the shared interval of a per-path model is refitted on this model (shared_edges empty)
+    return replace(chk, sel=out, wald=None, hetero=het, shared_edges=[]), sched
+
+
+def _occ_ratio(est) -> float:
+    """The fitted ratio of occupied- to unoccupied-hours gain noise intensity [-] (nan if
+    the fit has none)."""
+    return float(est.params_.get("occ_ratio", np.nan))
 
 
 def _path_heterogeneity(trials, sel, opt) -> dict | None:

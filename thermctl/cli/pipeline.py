@@ -105,6 +105,12 @@ def identify(
                                "backward pass from the selection and every path away from "
                                "walls whose addition screened below 0; kept when its BIC is "
                                "lower."),
+    schedule_check: bool = typer.Option(_D.selection.schedule_check,
+                                        "--schedule-check/--no-schedule-check",
+                                        help="--selection model, whole building: after the "
+                                        "selection, a backward pass from the kept air paths "
+                                        "with gains that wander faster in the occupied hours "
+                                        "(--gain-schedule occupied); the model is that fit."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
                                   "the backward pass tries again only the air paths whose "
@@ -305,7 +311,7 @@ def identify(
                                    min_t=min_t, predict_t=predict_t,
                                    misfit_ratio=misfit_ratio, swaps=swaps, adds=adds,
                                    union=union, recheck=recheck or None,
-                                   stability=stability,
+                                   schedule_check=schedule_check, stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
