@@ -1,0 +1,76 @@
+"""The gain-schedule check of `identify` (``SelectionOptions.schedule_check``).
+
+After the selection, a backward pass from the kept air paths under the gain schedule (the
+zones' random-walk gains wander faster in the occupied hours); a path whose removal costs
+that model less than the margin goes, and the model is the schedule's fit.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+from thermctl.data import read_measurements
+from thermctl.errors import DataError
+from thermctl.identify import EstimationOptions, IdentifyOptions, SelectionOptions, identify
+from thermctl.testbed import generate
+
+
+@pytest.fixture(scope="module")
+def ring():
+    """A ring of 6 offices round an unmeasured hall, 6 days, every factor of the broadened
+    family (random walls, hourly presence, noisy neighbours, control every 5 min), the
+    finite-volume plant, seed 0 (`benchmarks/family.py --quick`): the default keeps the
+    neighbouring offices n0–n1, which share a wall and no air path."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=6, seed=0, building="ring", zones=7, walls="random",
+                      gains="hourly", neighbour_noise=0.2, control_minutes=5, plant="fd")
+        meas = read_measurements(tb.data, tb.spec, name="ring")
+        opt = IdentifyOptions(selection=SelectionOptions(schedule_check=True),
+                              estimation=EstimationOptions(intervals="none"))
+        ident = identify(meas, opt)
+    true = {f"air:{'-'.join(sorted(e[:2]))}" for e in tb.truth.edges}
+    return ident, true
+
+
+def _edges(ident):
+    return {e.name for e in ident.model.network.convection_edges}
+
+
+def test_the_check_starts_from_the_selection_and_removes_a_false_path_only(ring):
+    ident, true = ring
+    path = ident.selection.path
+    at = [i for i, st in enumerate(path) if st.action == "check"]
+    assert len(at) == 1
+    before = set(path[at[0] - 1].edges)                 # where the selection stopped
+    assert set(path[at[0]].edges) == before
+    kept = _edges(ident)
+    gone = before - kept
+    assert kept < before and gone                       # this case shows a removal
+    assert not gone & true                              # ... of false paths only
+    assert before & true <= kept                        # every true path found stays
+    note = next(n for n in ident.notes if n.startswith("gain-schedule check"))
+    for name in gone:
+        assert name in note
+        assert "gain-schedule check" in ident.selection.reasons[name]
+
+
+def test_the_model_is_the_schedules_fit(ring):
+    ident, _ = ring
+    assert ident.options.estimation.gain_schedule == "occupied"
+    # hourly presence: the daytime gains wander faster than the night's (ratio of the
+    # occupied hours' random-walk intensity to the rest's, fitted)
+    assert ident.greybox.params_["occ_ratio"] > 1.5
+    assert ident.greybox.problem_.options.gain_schedule == "occupied"
+    assert {e.name for e in ident.greybox.problem_.edges} == _edges(ident)
+
+
+@pytest.mark.parametrize("est", [dict(gain_schedule="occupied"), dict(loop_gain=True),
+                                 dict(criterion="simulation")])
+def test_the_check_refuses_options_it_cannot_combine_with(est):
+    opt = IdentifyOptions(selection=SelectionOptions(schedule_check=True),
+                          estimation=EstimationOptions(**est))
+    with pytest.raises(DataError, match="schedule_check"):
+        opt.check()
