@@ -59,7 +59,8 @@ def test_the_check_starts_from_the_selection_and_removes_a_false_path_only(ring)
 
 def test_the_model_is_the_schedules_fit(ring):
     ident, _ = ring
-    assert ident.options.estimation.gain_schedule == "occupied"
+    assert ident.options.selection.schedule_check          # the user's options, as given
+    assert ident.options.estimation.gain_schedule is None
     # hourly presence: the daytime gains wander faster than the night's (ratio of the
     # occupied hours' random-walk intensity to the rest's, fitted)
     assert ident.greybox.params_["occ_ratio"] > 1.5

@@ -951,8 +951,11 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                                    final_per_edge=_per_edge_set(opt.estimation),
                                    workers=_threads(opt), ahead=ahead, **sel_kw)
             chk = _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress)
+            # the options of the model's fit: with the check, the schedule's (the user's
+            # options stay the record)
+            fit_opt = opt
             if opt.selection.schedule_check:
-                chk, opt = _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress)
+                chk, fit_opt = _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress)
             sel, wald, per_edge = chk.sel, chk.wald, chk.per_edge
         if opt.selection.stability:
             from .stability import stability_selection
@@ -964,7 +967,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
         if shared is not None and _pairs(sel.edges) != _pairs(chk.shared_edges):
             # the check or the stability drop removed paths: the per-path intervals take in
             # the shared R̄_v of the structure kept (one fit; none without intervals)
-            shared = (_shared_interval(spec, cal, opt, sel)
+            shared = (_shared_interval(spec, cal, fit_opt, sel)
                       if sel.edges and opt.estimation.intervals != "none" else None)
         net = ThermalNetwork(spec, sel.edges)
         _lost_data_note(sel.reasons.items(), {air_path_name(a, b) for a, b, _ in sel.edges},
@@ -973,7 +976,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             notes.append("the data support no convection edge: the model is conduction-only")
         else:
             gb = sel.estimator
-            ida = _intervals(gb, opt, notes, cal, progress,
+            ida = _intervals(gb, fit_opt, notes, cal, progress,
                              wald=wald[1] if wald is not None and wald[0] is gb else None)
             if not per_edge:                    # a per-path model holds no compromise
                 _hetero_widen(ida, chk.hetero, sel.edges, notes)
