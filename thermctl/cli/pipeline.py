@@ -107,10 +107,11 @@ def identify(
                                "lower."),
     schedule_check: bool = typer.Option(_D.selection.schedule_check,
                                         "--schedule-check/--no-schedule-check",
-                                        help="--selection model, whole building: after the "
-                                        "selection, a backward pass from the kept air paths "
-                                        "with gains that wander faster in the occupied hours "
-                                        "(--gain-schedule occupied); the model is that fit."),
+                                        help="--selection model, whole building: fit the "
+                                        "kept air paths with gains that wander faster in the "
+                                        "occupied hours (--gain-schedule occupied); where "
+                                        "that lowers BIC by more than --margin, a backward "
+                                        "pass on that model and the model is its fit."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
                                   "the backward pass tries again only the air paths whose "
