@@ -96,3 +96,21 @@ def test_a_removal_no_nested_fit_can_make_leaves_the_selection_standing():
     assert "not to be trusted" in note
     assert not any(st.action == "check" for st in ident.selection.path)
     assert ident.greybox.problem_.options.gain_schedule is None
+
+
+@pytest.mark.slow
+def test_the_intervals_take_in_the_default_gain_models():
+    """The same ring with intervals, identified with and without the check: the check's
+    R̄_v is its own fit (not the default's), and its interval contains the default's."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=6, seed=0, building="ring", zones=7, walls="random",
+                      gains="hourly", neighbour_noise=0.2, control_minutes=5, plant="fd")
+        meas = read_measurements(tb.data, tb.spec, name="ring")
+        runs = [identify(meas, IdentifyOptions(selection=SelectionOptions(schedule_check=on)))
+                for on in (False, True)]
+    plain, checked = (r.intervals.intervals["rbar_v"] for r in runs)
+    assert abs(checked.value / plain.value - 1.0) > 1e-3
+    assert checked.lower <= plain.lower and checked.upper >= plain.upper
+    assert any("default gain model's" in n for n in runs[1].notes)
+    assert "default gain model's" in runs[1].intervals.verdicts["rbar_v"]
