@@ -12,7 +12,6 @@ import warnings
 import pytest
 
 from thermctl.data import read_measurements
-from thermctl.errors import DataError
 from thermctl.identify import EstimationOptions, IdentifyOptions, SelectionOptions, identify
 from thermctl.testbed import generate
 
@@ -68,13 +67,15 @@ def test_the_model_is_the_schedules_fit(ring):
     assert {e.name for e in ident.greybox.problem_.edges} == _edges(ident)
 
 
-@pytest.mark.parametrize("est", [dict(gain_schedule="occupied"), dict(loop_gain=True),
-                                 dict(criterion="simulation")])
-def test_the_check_refuses_options_it_cannot_combine_with(est):
-    opt = IdentifyOptions(selection=SelectionOptions(schedule_check=True),
-                          estimation=EstimationOptions(**est))
-    with pytest.raises(DataError, match="schedule_check"):
-        opt.check()
+@pytest.mark.parametrize("est, runs", [({}, True), (dict(gain_schedule="occupied"), False),
+                                       (dict(loop_gain=True), False),
+                                       (dict(criterion="simulation"), False)])
+def test_the_check_runs_by_default_and_not_where_the_model_has_regimes(est, runs):
+    from thermctl.identify import _runs_schedule_check
+    opt = IdentifyOptions(estimation=EstimationOptions(**est)).check()   # valid: no raise
+    assert _runs_schedule_check(opt) is runs
+    off = IdentifyOptions(selection=SelectionOptions(schedule_check=False)).check()
+    assert not _runs_schedule_check(off)
 
 
 @pytest.mark.slow

@@ -192,10 +192,12 @@ class SelectionOptions:
         in the occupied hours). Where that lowers the criterion by more than ``margin``, a
         backward pass from the kept air paths on the schedule's likelihood removes a path
         whose removal costs it less than ``margin``, and the model is the schedule's fit;
-        elsewhere the selection stands. Hourly presence feeds false paths through the
+        elsewhere the selection stands; not with ``estimation.gain_schedule`` (the
+        selection's model has it) or ``estimation.loop_gain``. Hourly presence feeds false paths through the
         weekend's daytime samples, which the default gain takes as much at face value as
         the night's; the schedule says they are worth less (docs/identification.md, "The
-        gain schedule as a check"). Off by default; it needs time stamps.
+        gain schedule as a check"). On by default since session 41; it needs time stamps
+        (without them it is skipped, with a note).
     """
 
     method: str = "auto"
@@ -212,7 +214,7 @@ class SelectionOptions:
     stability: int = 0
     stability_threshold: float = 0.6
     stability_seed: int = 0
-    schedule_check: bool = False
+    schedule_check: bool = True
 
     def check(self):
         _one_of("selection", "method", self.method, SELECTIONS)
@@ -638,13 +640,6 @@ class IdentifyOptions:
         if self.selection.stability and self.selection_method == "scores":
             raise DataError("identify: selection.stability needs the model-based selection "
                             "(selection.method='model' with a Kalman criterion)")
-        if self.selection.schedule_check and (self.selection_method == "scores"
-                                              or self.estimation.gain_schedule is not None
-                                              or self.estimation.loop_gain):
-            raise DataError("identify: selection.schedule_check needs the model-based "
-                            "selection with a Kalman criterion, without "
-                            "estimation.gain_schedule (the selection's own model then has "
-                            "the schedule) or estimation.loop_gain (two regimes each)")
         local = self.split.scale == "local"
         if local and self.selection_method == "scores":
             raise DataError("identify: split.scale='local' needs the model-based selection "
@@ -956,7 +951,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             # options stay the record); `before`: the selection's own model, when the check
             # replaced it, for the intervals to take in
             fit_opt, before = opt, None
-            if opt.selection.schedule_check:
+            if _runs_schedule_check(opt):
                 before = chk
                 chk, fit_opt = _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress)
                 before = None if fit_opt is opt else before
@@ -1965,6 +1960,15 @@ def _misfit_check(spec, cal, opt, sel, sel_kw, notes, progress) -> _Checked:
         notes.append(_per_path_note(pe_values, shown, lim))
     return _Checked(out, (gb, wald) if not gone and out.estimator is gb else None, True,
                     per_edge, shared, list(sel.edges))
+
+
+def _runs_schedule_check(opt) -> bool:
+    """Whether the whole-building selection is followed by the gain-schedule check: asked
+    for, and the selection's own model neither has the schedule already
+    (``estimation.gain_schedule``) nor two regimes of its own (``estimation.loop_gain``)."""
+    est = opt.estimation
+    return (bool(opt.selection.schedule_check) and est.gain_schedule is None
+            and not est.loop_gain and opt.selection_method == "model")
 
 
 def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
