@@ -193,11 +193,11 @@ class SelectionOptions:
         backward pass from the kept air paths on the schedule's likelihood removes a path
         whose removal costs it less than ``margin``, and the model is the schedule's fit;
         elsewhere the selection stands; not with ``estimation.gain_schedule`` (the
-        selection's model has it) or ``estimation.loop_gain``. Hourly presence feeds false paths through the
-        weekend's daytime samples, which the default gain takes as much at face value as
-        the night's; the schedule says they are worth less (docs/identification.md, "The
-        gain schedule as a check"). On by default since session 41; it needs time stamps
-        (without them it is skipped, with a note).
+        selection's model has it) or ``estimation.loop_gain``. Hourly presence feeds false
+        paths through the weekend's daytime samples, which the default gain takes as much at
+        face value as the night's; the schedule says they are worth less
+        (docs/identification.md, "The gain schedule as a check"). On by default since
+        session 41; it needs time stamps (without them it is skipped, with a note).
     """
 
     method: str = "auto"
@@ -952,9 +952,8 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
             # replaced it, for the intervals to take in
             fit_opt, before = opt, None
             if _runs_schedule_check(opt):
-                before = chk
-                chk, fit_opt = _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress)
-                before = None if fit_opt is opt else before
+                checked, fit_opt = _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress)
+                before, chk = (None if fit_opt is opt else chk), checked
             sel, per_edge = chk.sel, chk.per_edge
         if opt.selection.stability:
             from .stability import stability_selection
@@ -962,12 +961,7 @@ def _identify_greybox(meas, cal, val, opt, progress, off=None) -> Identification
                                        seed=opt.selection.stability_seed,
                                        workers=opt.split.workers, progress=progress, **sel_kw)
             sel = _drop_unstable(spec, cal, opt, sel, stab, notes, per_edge)
-        shared = chk.shared
-        if shared is not None and _pairs(sel.edges) != _pairs(chk.shared_edges):
-            # the check or the stability drop removed paths: the per-path intervals take in
-            # the shared R̄_v of the structure kept (one fit; none without intervals)
-            shared = (_shared_interval(spec, cal, fit_opt, sel)
-                      if sel.edges and opt.estimation.intervals != "none" else None)
+        shared = _kept_shared_interval(spec, cal, fit_opt, chk, sel)
         net = ThermalNetwork(spec, sel.edges)
         _lost_data_note(sel.reasons.items(), {air_path_name(a, b) for a, b, _ in sel.edges},
                         notes)
@@ -2071,6 +2065,18 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
     return replace(chk, sel=out, wald=None, hetero=het, shared_edges=[]), sched
 
 
+def _kept_shared_interval(spec, cal, opt, chk, sel):
+    """The shared R̄_v interval a per-path model's intervals take in (``chk.shared``), of
+    the structure ``sel`` kept: refitted where a check or the stability drop removed paths
+    since it was made, or the gain-schedule check changed the model (``shared_edges``
+    empty); None without intervals or without a shared interval."""
+    shared = chk.shared
+    if shared is not None and _pairs(sel.edges) != _pairs(chk.shared_edges):
+        shared = (_shared_interval(spec, cal, opt, sel)
+                  if sel.edges and opt.estimation.intervals != "none" else None)
+    return shared
+
+
 def _model_intervals(sel, chk, shared, opt, notes, cal, progress=None):
     """The intervals of the model of ``sel`` (its estimator), widened: a shared R̄_v's by
     the paths' heterogeneity (``chk.hetero``), per-path values to take in the shared
@@ -2096,9 +2102,7 @@ def _gain_models_widen(spec, cal, opt, ida, before, notes) -> None:
     rounding: 15-26 % low) does not shrink with it. Measured on the broadened family:
     the schedule's own intervals covered the truth on 11 of 16 buildings, the default's
     on 15 (docs/identification.md, "The gain schedule as a check")."""
-    shared = before.shared
-    if shared is not None and _pairs(before.sel.edges) != _pairs(before.shared_edges):
-        shared = _shared_interval(spec, cal, opt, before.sel)
+    shared = _kept_shared_interval(spec, cal, opt, before, before.sel)
     ida0 = _model_intervals(before.sel, before, shared, opt, [], cal)
     if ida0 is None:
         return
