@@ -102,15 +102,21 @@ def test_per_path_p_makes_the_model_per_path_where_the_paths_disagree():
     takes in the shared value's interval widened by the scatter, the one the shared model
     reports."""
     from thermctl.data import read_measurements
-    from thermctl.identify import EstimationOptions, IdentifyOptions, identify
+    from thermctl.identify import (EstimationOptions, IdentifyOptions, SelectionOptions,
+                                   identify)
     from thermctl.testbed import generate
+    # the selection's own model: with the gain-schedule check (default since session 41)
+    # the paths' p is 0.026 on this case, below both limits
+    sel = SelectionOptions(schedule_check=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate(days=14, seed=1, walls="random")
         meas = read_measurements(tb.data, tb.spec, name="walls")
-        shared = identify(meas)
-        per = identify(meas, IdentifyOptions(estimation=EstimationOptions(per_path_p=0.2)))
-        off = identify(meas, IdentifyOptions(estimation=EstimationOptions(per_path_p=0.1)))
+        shared = identify(meas, IdentifyOptions(selection=sel))
+        per = identify(meas, IdentifyOptions(selection=sel,
+                                             estimation=EstimationOptions(per_path_p=0.2)))
+        off = identify(meas, IdentifyOptions(selection=sel,
+                                             estimation=EstimationOptions(per_path_p=0.1)))
     het = shared.intervals.heterogeneity
     assert 0.1 < het["p"] < 0.2
     assert het["p"] == pytest.approx(math.exp(-het["Q"] / 2), rel=1e-9)   # χ² on 2 dof

@@ -128,8 +128,11 @@ def test_disagreeing_paths_withdraw_identified_on_finite_volume_walls():
     meas = read_measurements(tb.data, tb.spec, name="tb")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ident = identify(meas, IdentifyOptions(estimation=EstimationOptions(
-            intervals="wald", noise="shared")))
+        # the selection's own model: the gain-schedule check (default since session 41)
+        # changes what this case keeps
+        ident = identify(meas, IdentifyOptions(
+            selection=SelectionOptions(schedule_check=False),
+            estimation=EstimationOptions(intervals="wald", noise="shared")))
     ida = ident.intervals
     lo, hi = ida.paths_disagree
     assert hi / lo > 2.0 and any("disagree on R̄_v" in n for n in ident.notes)
