@@ -2017,7 +2017,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)
-            first = scorer.fit(as_candidates(spec, list(sel.edges)))
+            first = scorer.fit(as_candidates(spec, list(sel.edges)), warm=sel.estimator)
             gain = first[1] - last.value
             head += (f": {sel.criterion.upper()} {gain:+.1f} with the schedule (occupied-hours "
                      f"gain noise intensity ×{_occ_ratio(first[0]):.2g})")
