@@ -117,12 +117,12 @@ def test_a_removal_no_nested_fit_can_make_leaves_the_selection_standing(monkeypa
 
 
 @pytest.mark.slow
-def test_the_check_starts_from_the_selections_model():
+def test_the_checks_first_fit_is_the_better_of_two_starts():
     """Pugh Hall with perfect sensors (the paper's mild case), seed 1, 14 days. Started
     cold, the schedule's fit of the 3 true paths missed its optimum, and removing the true
-    r240–r243 then "improved" BIC by about 1.4e5 (session 41: the guard fired). Started
-    from the selection's own model, the fit is at its optimum: every true path stays and
-    the model is the schedule's fit."""
+    r240–r243 then "improved" BIC by about 1.4e5 (session 41: the guard fired). The fit
+    started from the selection's own model is better, and the check takes it: every true
+    path stays and the model is the schedule's fit."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate(days=14, seed=1, building="pugh-hall", noise=None, control_minutes=5)
