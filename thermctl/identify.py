@@ -1686,13 +1686,14 @@ def _intervals(gb, opt, notes, cal=None, progress=None, wald=None, stage="interv
 def _intervals_of(gb, opt, notes, cal, wald=None, tau0=True):
     """The intervals of the fit ``gb``: its R̄_v, and τ0 with ``tau0``."""
     from .estimate.likelihood import identifiability
-    names = [n for n in gb.problem_.layout.names if n.startswith("rbar_v")] + \
-        (["tau0"] if tau0 else [])
+    rbar = [n for n in gb.problem_.layout.names if n.startswith("rbar_v")]
+    names = rbar + (["tau0"] if tau0 else [])
     method = opt.estimation.intervals
-    if method == "profile" and len(names) > 5:
-        # a profile costs ~10 fits per parameter: past a few per-edge R̄_v, Wald
+    if method == "profile" and len(rbar) > 4:
+        # a profile costs ~10 fits per parameter: past a few per-edge R̄_v, Wald (the
+        # same method with or without τ0, so that two models' intervals compare)
         method = "wald"
-        notes.append(f"{len(names) - 1} per-edge R̄_v: Wald intervals instead of profiles "
+        notes.append(f"{len(rbar)} per-edge R̄_v: Wald intervals instead of profiles "
                      "(a profile costs about 10 fits per parameter)")
     try:
         ida = identifiability(gb, params=tuple(names), method=method, threads=_threads(opt),
