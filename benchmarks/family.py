@@ -49,6 +49,7 @@ import logging
 import subprocess
 import time
 import warnings
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -128,7 +129,7 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
     true = {tuple(sorted(e[:2])) for e in tb.truth.edges}
     visible = {p for p in true if set(p) <= measured}
     row = dict(study=study, case=name, seed=seed, days=days, session=SESSION, commit=_COMMIT,
-               kwargs=_plain(kwargs),
+               versions=_VERSIONS, kwargs=_plain(kwargs),
                building=tb.spec.name, zones=tb.network.n_zones, measured=len(measured),
                true=sorted(visible), hidden_true=sorted(true - visible), gen_s=round(t_gen, 1))
     if estimation:
@@ -187,10 +188,14 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 42
+SESSION = 43
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
+_VERSIONS = {m: metadata.version(m) for m in ("numpy", "scipy", "casadi")}
+"""Also in every row (since session 43): the open-plan 3R2C seed-1 selection of session 42
+(9 paths before the misfit check, 165 fits) was not session 41's (6, 73), though no commit
+between them touched the selection; the virtual environment is made anew from ranges."""
 
 
 def _as_default(row):

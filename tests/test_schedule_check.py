@@ -78,12 +78,15 @@ def test_the_check_runs_by_default_and_not_where_the_model_has_regimes(est, runs
     assert not _runs_schedule_check(off)
 
 
-def test_a_removal_no_nested_fit_can_make_leaves_the_selection_standing(monkeypatch):
+def test_a_removal_no_nested_fit_can_make_leaves_the_selection_standing(monkeypatch, caplog):
     """The guard: a removal on the schedule's likelihood that lowers BIC by more than a
     model with one path less can (ln N, the one parameter's penalty, plus the margin)
-    shows a fit that missed its optimum, and the selection and its model stand. The ring's
-    own removal of n0–n1 (above) passes it; here that removal's change is made 0.5 worse
-    than the limit, in the check's backward pass only."""
+    shows a fit that missed its optimum. The check first refits the kept paths once from
+    the optimum without the removed one; where the removal still gains too much, the
+    selection and its model stand. The ring's own removal of n0–n1 (above) passes it; here
+    that removal's change is made 0.5 worse than the limit, in the check's backward passes
+    only."""
+    import logging
     import math
 
     import thermctl.selection as selection
@@ -101,6 +104,7 @@ def test_a_removal_no_nested_fit_can_make_leaves_the_selection_standing(monkeypa
         return out
 
     monkeypatch.setattr(selection, "select_air_paths", worse)
+    caplog.set_level(logging.INFO, logger="thermctl.identify")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate(days=6, seed=0, building="ring", zones=7, walls="random",
@@ -111,6 +115,8 @@ def test_a_removal_no_nested_fit_can_make_leaves_the_selection_standing(monkeypa
     assert -seen["limit"] < seen["real"] < seen["margin"]
     note = next(n for n in ident.notes if n.startswith("gain-schedule check"))
     assert "not to be trusted" in note
+    said = [r.getMessage() for r in caplog.records]
+    assert sum("refitted from the optimum without them" in m for m in said) == 1
     assert not any(st.action == "check" for st in ident.selection.path)
     assert ident.greybox.problem_.options.gain_schedule is None
     assert "air:n0-n1" in _edges(ident)                 # the selection's, unchecked
