@@ -158,3 +158,23 @@ def test_the_intervals_take_in_the_default_gain_models():
     assert checked.lower <= plain.lower and checked.upper >= plain.upper
     assert any("default gain model's" in n for n in runs[1].notes)
     assert "default gain model's" in runs[1].intervals.verdicts["rbar_v"]
+
+
+def test_the_checks_scorer_scores_as_the_search():
+    """``air_path_scorer`` given ``select_air_paths``' own keywords (the search's among
+    them, as the check passes them) scores a structure as the search does: the same
+    criterion value for the search's start, to rounding."""
+    from thermctl.selection import air_path_scorer, select_air_paths
+    from thermctl.structure.search import as_candidates
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=3, seed=0)
+        meas = read_measurements(tb.data, tb.spec, name="pugh")
+        edge = tuple(tb.truth.edges[0])
+        kw = dict(candidates=[edge], direction="backward", start=(), margin=10.0,
+                  criterion="bic", swaps=None, recheck=None, max_iter=60)
+        sel = select_air_paths(tb.spec, meas, **kw)
+        _, value = air_path_scorer(tb.spec, meas, **kw).fit(as_candidates(tb.spec, [edge]))
+    assert sel.path[0].action == "start" and len(sel.path[0].edges) == 1
+    assert value == pytest.approx(sel.path[0].value, rel=1e-10)

@@ -1984,8 +1984,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
     """
     from dataclasses import replace
 
-    from .estimate.likelihood.scoring import LikelihoodScorer
-    from .selection import select_air_paths
+    from .selection import air_path_scorer, select_air_paths
     from .structure.search import SelectionStep, as_candidates
 
     sel = chk.sel
@@ -2012,9 +2011,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
     say(f"the {n} kept air path(s) fitted with the gain schedule")
     kw = dict(sel_kw, candidates=list(sel.edges), direction="backward", start=(), swaps=None,
               adds=False, union=False, gain_schedule="occupied")
-    search = ("candidates", "direction", "margin", "start", "swaps", "adds", "recheck",
-              "union")
-    scorer = LikelihoodScorer(spec, cal, **{k: v for k, v in kw.items() if k not in search})
+    scorer = air_path_scorer(spec, cal, **kw)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BoundWarning)

@@ -9,6 +9,7 @@ the paper's SIN picks as an optional candidate set
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ from .network import ThermalNetwork
 from .structure.search import RECHECK, _cand, as_candidates, candidate_pairs, search_edges
 
 __all__ = ["SelectionResult", "select_air_paths", "sin_candidates", "judge_air_paths", "CRITERIA",
-           "per_path_rbar", "shared_start"]
+           "per_path_rbar", "shared_start", "air_path_scorer"]
 
 
 @dataclass
@@ -270,6 +271,22 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     return SelectionResult([x.pair + (x.d,) for x in cur], res.candidates, res.path, res.reasons,
                            criterion, final, per_edge, time.perf_counter() - t0, scorer.n_fits,
                            res.trials, est.problem_.n_blocks(scorer.block))
+
+
+#: keywords of :func:`select_air_paths` that are its search's and its final model's, not
+#: the scorer's (from the signatures, so that a new keyword of either is placed by itself)
+_SEARCH_KEYS = (frozenset(inspect.signature(select_air_paths).parameters)
+                - frozenset(inspect.signature(LikelihoodScorer).parameters))
+
+
+def air_path_scorer(spec, data, **select_kw) -> LikelihoodScorer:
+    """The scorer that :func:`select_air_paths` ``(spec, data, **select_kw)`` scores its
+    structures with: its keywords without those of the search and its final model.
+
+    For a fit outside the search that must be scored as the search scores (a check of
+    its result, whose fits enter the search again through ``known``)."""
+    return LikelihoodScorer(spec, data, **{k: v for k, v in select_kw.items()
+                                           if k not in _SEARCH_KEYS})
 
 
 def judge_air_paths(spec, data, kept, tests, *, criterion: str = "bic", margin: float = 10.0,
