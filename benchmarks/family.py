@@ -319,6 +319,9 @@ def main(argv=None):
     ap.add_argument("--no-schedule-check", action="store_true",
                     help="identify's --no-schedule-check, the default before session 41 "
                     "(case names get ' [no schedule check]')")
+    ap.add_argument("--schedule-adds", action="store_true",
+                    help="selection.schedule_adds: the gain-schedule check also swaps and "
+                         "adds (case names get ' [schedule adds]')")
     ap.add_argument("--union", action="store_true",
                     help="identify's --union (case names get ' [union]')")
     ap.add_argument("--per-edge", action="store_true",
@@ -433,6 +436,9 @@ def main(argv=None):
         if args.no_schedule_check:
             sel["schedule_check"] = False
             name += " [no schedule check]"
+        if args.schedule_adds:
+            sel["schedule_adds"] = True
+            name += " [schedule adds]"
         if args.recheck is not None:
             sel["recheck"] = args.recheck or None
             name += f" [recheck {args.recheck:g}]"

@@ -198,6 +198,11 @@ class SelectionOptions:
         face value as the night's; the schedule says they are worth less
         (docs/identification.md, "The gain schedule as a check"). On by default since
         session 41; it needs time stamps (without them it is skipped, with a note).
+    schedule_adds : bool
+        With ``schedule_check``: after its backward pass, the swaps and additions of the
+        selection (``swaps``, ``adds``) on the schedule's likelihood too, so that the check
+        may also put in paths the default gain model's selection missed. Off by default
+        (docs/identification.md, "The gain schedule as a check").
     """
 
     method: str = "auto"
@@ -215,6 +220,7 @@ class SelectionOptions:
     stability_threshold: float = 0.6
     stability_seed: int = 0
     schedule_check: bool = True
+    schedule_adds: bool = False
 
     def check(self):
         _one_of("selection", "method", self.method, SELECTIONS)
@@ -231,7 +237,7 @@ class SelectionOptions:
                 and not isinstance(self.misfit_ratio, bool) and self.misfit_ratio >= 0):
             raise DataError(f"identify option selection.misfit_ratio must be a number >= 0 "
                             f"(0: off), found {self.misfit_ratio!r}")
-        for name in ("swaps", "adds", "union", "schedule_check"):
+        for name in ("swaps", "adds", "union", "schedule_check", "schedule_adds"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise DataError(f"identify option selection.{name} must be True or False, "
                                 f"found {getattr(self, name)!r}")
@@ -2009,8 +2015,10 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
         logger.info("gain-schedule check: not run, no criterion value of the kept structure")
         return chk, opt
     say(f"the {n} kept air path(s) fitted with the gain schedule")
-    kw = dict(sel_kw, candidates=list(sel.edges), direction="backward", start=(), swaps=None,
-              adds=False, union=False, gain_schedule="occupied")
+    grow = bool(opt.selection.schedule_adds)
+    kw = dict(sel_kw, candidates=list(sel.edges), direction="backward", start=(),
+              swaps=sel_kw.get("swaps") if grow else None, adds=grow and sel_kw.get("adds"),
+              union=False, gain_schedule="occupied")
     scorer = air_path_scorer(spec, cal, **kw)
     try:
         with warnings.catch_warnings():
@@ -2036,9 +2044,12 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
                 # the fit with the paths missed its optimum (see the guard below): once more
                 # from the optimum without them, the paths removed at their values in it
                 again = scorer.fit(as_candidates(spec, list(sel.edges)),
-                                   warm=_nested_start(new.estimator, first[0]))
+                                   warm=_nested_start(new, first[0]))
                 say(f"a removal gained more than {-limit:.1f}: the kept paths refitted from "
-                    f"the optimum without them, {first[1] - again[1]:+.1f} better")
+                    f"the optimum without them, {first[1] - again[1]:+.1f} better"
+                    if math.isfinite(again[1]) else
+                    f"a removal gained more than {-limit:.1f}: the kept paths could not be "
+                    "refitted from the optimum without them (the likelihood fails there)")
                 if again[1] < first[1]:
                     refit = (f" (refitted from the optimum without "
                              f"{', '.join(sorted(names - _names(new.edges)))}: "
@@ -2063,6 +2074,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
         return chk, opt
     kept = {air_path_name(a, b) for a, b, _ in new.edges}
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
+    came = sorted(kept - names)
     reasons = dict(sel.reasons)
     for k, why in new.reasons.items():
         reasons[k] = f"{reasons[k]}; gain-schedule check: {why}" if k in reasons else why
@@ -2075,9 +2087,12 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
                     new.trials, new.days)
     said = (f"removed {', '.join(gone)} (each worth less than {opt.selection.margin:g} in "
             "BIC once the daytime gains may wander faster)" if gone else "every one stays")
+    if came:
+        said += f"; in by a swap or an addition on its likelihood: {', '.join(came)}"
     if new.edges:
         said += "; the model is the schedule's fit"
-    notes.append(f"{head}, so a backward pass on its likelihood{refit}: {said}.")
+    how = "a backward pass, swaps and additions" if grow else "a backward pass"
+    notes.append(f"{head}, so {how} on its likelihood{refit}: {said}.")
     het = None if chk.per_edge else _path_heterogeneity(new.trials, out, sched)
     out.trials = {}
     # the shared interval of a per-path model is refitted on this model (shared_edges empty)
@@ -2094,9 +2109,11 @@ def _worst_removal(sel) -> float:
     return min((st.delta for st in sel.path if st.action == "remove"), default=0.0)
 
 
-def _nested_start(smaller, fit):
-    """A warm start (for :meth:`LikelihoodScorer.fit`) at the optimum ``smaller`` of a
-    structure with fewer air paths; the paths it lacks at their R̄_v in ``fit``.
+def _nested_start(sel, fit):
+    """A warm start (for :meth:`LikelihoodScorer.fit`) at the optimum of the structure the
+    backward pass ``sel`` ended with (the search's own fit, one R̄_v per path, as the
+    scorer fits; not ``sel``'s model, which may share one R̄_v); the paths it removed at
+    their R̄_v in ``fit``.
 
     On the l-shape (3R2C plant, seed 0, 16 days) the schedule's fit of the 4 kept paths
     stopped 6 nats above what the 3-path fit implies, and the removal of the false a0–b0
@@ -2104,6 +2121,8 @@ def _nested_start(smaller, fit):
     false path stayed."""
     from types import SimpleNamespace
 
+    got = sel.trials.get(_names(sel.edges))
+    smaller = sel.estimator if got is None else got[0]
     params = dict(smaller.params_)
     params.update({k: v for k, v in fit.params_.items()
                    if k.startswith("rbar_v[") and k not in params})
