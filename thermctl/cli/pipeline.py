@@ -112,6 +112,12 @@ def identify(
                                         "occupied hours (--gain-schedule occupied); where "
                                         "that lowers BIC by more than --margin, a backward "
                                         "pass on that model and the model is its fit."),
+    schedule_adds: bool = typer.Option(_D.selection.schedule_adds,
+                                       "--schedule-adds/--no-schedule-adds",
+                                       help="with --schedule-check: the check also swaps "
+                                       "and adds air paths on the schedule's model (off: "
+                                       "on the broadened test family +6 true and +3 false "
+                                       "paths)."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
                                   "the backward pass tries again only the air paths whose "
@@ -312,7 +318,8 @@ def identify(
                                    min_t=min_t, predict_t=predict_t,
                                    misfit_ratio=misfit_ratio, swaps=swaps, adds=adds,
                                    union=union, recheck=recheck or None,
-                                   schedule_check=schedule_check, stability=stability,
+                                   schedule_check=schedule_check,
+                                   schedule_adds=schedule_adds, stability=stability,
                                    stability_threshold=stability_threshold),
         estimation=EstimationOptions(criterion=criterion, solar=solar, intervals=intervals,
                                      estimator=estimator, window_hours=window_hours,
