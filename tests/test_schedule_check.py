@@ -130,9 +130,9 @@ def test_the_check_keeps_the_true_paths_where_its_fits_degenerate(caplog):
     noise); without the true r240–r243 the fit "gains" BIC about 1.4e5, more than a model
     with one path less can, and the 3 paths cannot be refitted from there (the likelihood
     fails at that optimum with the path in). The guard leaves the selection standing: the
-    3 true paths, the selection's own model. (Session 42 measured the fit started from the
-    selection's model alone, -153 996, where no removal asked for the guard; the cold fit
-    beside it is better, -154 034, and its removal trial ends in the degenerate optimum.)"""
+    3 true paths, the selection's own model. (Session 43: the fit started from the
+    selection's model ends at BIC -153 996, the cold one beside it at -154 034, the better
+    of the two, both with σ_v on its bound.)"""
     import logging
 
     caplog.set_level(logging.INFO, logger="thermctl.identify")
@@ -197,8 +197,8 @@ def test_schedule_adds_puts_in_the_true_path_the_selection_missed():
     selection misses the true n1–west (3 of 4), and the check's backward pass can only
     remove. With ``selection.schedule_adds`` the check also swaps and adds on the
     schedule's likelihood and puts it in: the 4 true paths, none false (session 43:
-    step error 19.6 → 7.0 %; on the whole family +5 true paths and +3 false, so off by
-    default)."""
+    step error 19.6 → 7.0 %; on 15 buildings of the family +6 true paths and +4 false, so
+    off by default)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tb = generate(days=16, seed=1, building="ring", walls="random", gains="hourly",

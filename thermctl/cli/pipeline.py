@@ -116,7 +116,7 @@ def identify(
                                        "--schedule-adds/--no-schedule-adds",
                                        help="with --schedule-check: the check also swaps "
                                        "and adds air paths on the schedule's model (off: "
-                                       "on the broadened test family +6 true and +3 false "
+                                       "on the broadened test family +6 true and +4 false "
                                        "paths)."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
