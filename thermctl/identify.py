@@ -2010,7 +2010,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
             progress(f"gain-schedule check fits ({n} air paths)", k, None)
 
     last = sel.path[-1] if sel.path else None
-    names = frozenset(air_path_name(a, b) for a, b, _ in sel.edges)
+    names = _names(sel.edges)
     if last is None or frozenset(last.edges) != names:
         logger.info("gain-schedule check: not run, no criterion value of the kept structure")
         return chk, opt
@@ -2072,7 +2072,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
                      "its optimum): the check is not to be trusted here; the selection and its "
                      "model stand.")
         return chk, opt
-    kept = {air_path_name(a, b) for a, b, _ in new.edges}
+    kept = _names(new.edges)
     gone = [air_path_name(a, b) for a, b, _ in sel.edges if air_path_name(a, b) not in kept]
     came = sorted(kept - names)
     reasons = dict(sel.reasons)
