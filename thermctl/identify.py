@@ -2045,11 +2045,10 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
                 # from the optimum without them, the paths removed at their values in it
                 again = scorer.fit(as_candidates(spec, list(sel.edges)),
                                    warm=_nested_start(new, first[0]))
-                say(f"a removal gained more than {-limit:.1f}: the kept paths refitted from "
-                    f"the optimum without them, {first[1] - again[1]:+.1f} better"
-                    if math.isfinite(again[1]) else
-                    f"a removal gained more than {-limit:.1f}: the kept paths could not be "
-                    "refitted from the optimum without them (the likelihood fails there)")
+                say(f"a removal gained more than {-limit:.1f}: the kept paths "
+                    + (f"refitted from the optimum without them, {first[1] - again[1]:+.1f} "
+                       "better" if math.isfinite(again[1]) else "could not be refitted from "
+                       "the optimum without them (the likelihood fails there)"))
                 if again[1] < first[1]:
                     refit = (f" (refitted from the optimum without "
                              f"{', '.join(sorted(names - _names(new.edges)))}: "
@@ -2229,7 +2228,7 @@ def _path_heterogeneity(trials, sel, opt) -> dict | None:
 
     from .estimate.likelihood import wald_intervals
     from .estimate.likelihood.uncertainty import random_effects_inflation
-    names = frozenset(air_path_name(a, b) for a, b, _ in sel.edges)
+    names = _names(sel.edges)
     fit = trials.get(names, (None,))[0]
     if len(names) < 2 or fit is None or getattr(fit, "problem_", None) is None:
         return None
@@ -2377,7 +2376,7 @@ def _per_path_model(sel, trials, notes, note: str):
     fit is not there."""
     from dataclasses import replace
 
-    got = trials.get(frozenset(air_path_name(a, b) for a, b, _ in sel.edges))
+    got = trials.get(_names(sel.edges))
     if got is None:
         logger.info("per-path R̄_v: the selection's per-path fit was not kept; shared R̄_v")
         return sel
