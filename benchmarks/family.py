@@ -188,7 +188,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 43
+SESSION = 44
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
@@ -212,7 +212,9 @@ def _as_default(row):
     first family, and the broadened family's rows that say session 22). Rows run with
     ``--schedule-check`` alone (session 41, before the gain-schedule check became the
     default) are default runs and lose " [schedule check]"; the factor study's rows are
-    from before it.
+    from before it. Session 43's ``--schedule-adds`` rows were run before the paths that
+    come in were asked the 6-h prediction test (session 44): they read " [schedule adds,
+    no entry test]".
     """
     if row.get("selection") == {"swaps": True} and not row.get("estimation"):
         row = dict(row, case=row["case"].replace(" [swaps]", ""))
@@ -220,6 +222,9 @@ def _as_default(row):
         row = dict(row, case=row["case"].replace(" [adds]", ""))
     if row.get("selection") == {"schedule_check": True}:
         row = dict(row, case=row["case"].replace(" [schedule check]", ""))
+    if (row.get("selection") or {}).get("schedule_adds") and row.get("session", 0) < 44:
+        row = dict(row, case=row["case"].replace(" [schedule adds]",
+                                                 " [schedule adds, no entry test]"))
     noise = (row.get("estimation") or {}).get("noise")
     if row.get("session", 0) < 20 and noise is None:
         row = dict(row, case=row["case"] + " [noise shared]")

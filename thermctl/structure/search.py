@@ -161,6 +161,7 @@ class Scorer(Protocol):
 
     # optional: consistent(small, big) -> (bool, float, str): whether ``big`` (one more
     # edge) is better than ``small`` consistently, a statistic and a few words on it;
+    # admits(small, big): the same for an edge that comes in by a swap or an addition;
     # fit_many(structures, warm=None, workers=1) -> [(fitted, value), ...]: fit() of each,
     # side by side; pool(workers): a context giving an object with submit(edges, warm) ->
     # Future of fit(edges, warm), result(future) -> (fitted, value), cancel(future) and
@@ -252,8 +253,9 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         A swap must also improve the likelihood day after day: the t statistic of the daily
         differences (``scorer.consistent`` of the two structures, Vuong's test for models
         that are not nested) must reach this [-], and whatever the scorer's own test asks
-        (``min_t``, ``predict_t``); scorers without ``consistent`` are not asked. The test
-        protects a kept edge whose own daily gain reaches ``swap_t``; one below it is
+        (``min_t``, ``predict_t``; ``scorer.admits`` in place of ``consistent`` where the
+        scorer has it: what it asks of a path that comes in); scorers without
+        ``consistent`` are not asked. The test protects a kept edge whose own daily gain reaches ``swap_t``; one below it is
         replaced on the criterion (a positive t) alone.
     adds : bool
         With ``swaps``: when no swap is made, also try adding one of ``swaps`` (screened
@@ -321,8 +323,14 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     say = progress or (lambda msg: None)
     consistent = getattr(scorer, "consistent", None)
 
+    # a path that comes in by a swap or an addition may be asked more (LikelihoodScorer.admits)
+    admits = getattr(scorer, "admits", None) or consistent
+
     def holds(small, big):
         return (True, float("nan"), "") if consistent is None else consistent(small, big)
+
+    def enters(small, big):
+        return (True, float("nan"), "") if admits is None else admits(small, big)
 
     entered = {}            # edge name -> how it entered (added, swapped in)
     support = {}            # kept edge name -> daily-gain t of keeping it (the last keep step)
@@ -600,7 +608,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
                 # edge (ring of offices, 3R2C plant, per-zone noise: the kept s1-s2 holds
                 # with t 0.9; the true n2-s2 in its place gains 23.4 in all, on 11 of 12
                 # days, but loses 11 on one: t 0.7)
-                ok, t, why = holds(fitted, f_new)
+                ok, t, why = enters(fitted, f_new)
                 need = swap_t if not support.get(e.name, math.inf) < swap_t else 0.0
                 if ok and not t < need:
                     best = (v_new, f_new, e, c, why + (
@@ -649,7 +657,7 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
             for name in top:
                 f_new, v_new = done[frozenset(names | {name})]
                 if v_new - val < -margin and (best is None or v_new < best[0]):
-                    ok, t, why = holds(fitted, f_new)
+                    ok, t, why = enters(fitted, f_new)
                     if ok and not t < swap_t:
                         best = (v_new, f_new, swap_by_name[name], why)
             if best is not None:

@@ -95,6 +95,10 @@ class LikelihoodScorer:
         Consistency an air path must show in prediction: the t statistic of its daily
         reduction of the ``predict_horizon``-ahead prediction error (:meth:`consistent`)
         [-]; None: not tested. Negative: a veto on paths that predict worse.
+    entry_predict_t : float or None
+        The same prediction test asked only of a path that enters by a swap or an addition
+        (:meth:`admits`), not of one the backward pass keeps [-]; None: not asked (with
+        ``predict_t`` set every path is asked that one).
     predict_horizon : float
         [s]
     cold_start : dict, optional
@@ -116,7 +120,8 @@ class LikelihoodScorer:
                  tol: float = 1e-9, stall=STALL, on_fit=None,
                  min_t: float = 0.0, block: float = 86400.0, predict_t: float | None = None,
                  predict_horizon: float = 6 * 3600.0, cold_start: dict | None = None,
-                 min_t_days: float | None = None, **estimator_kwargs):
+                 min_t_days: float | None = None, entry_predict_t: float | None = None,
+                 **estimator_kwargs):
         if criterion not in CRITERIA:
             raise EstimationError(f"criterion must be one of {CRITERIA}, found {criterion!r}")
         if screen not in SCREENS:
@@ -137,6 +142,7 @@ class LikelihoodScorer:
         self.min_t_days = None if min_t_days is None else float(min_t_days)
         self.block = float(block)
         self.predict_t = None if predict_t is None else float(predict_t)
+        self.entry_predict_t = None if entry_predict_t is None else float(entry_predict_t)
         self.predict_horizon = float(predict_horizon)
         self.cold_start = None if not cold_start else {k: float(v) for k, v in cold_start.items()}
         self.n_fits = 0
@@ -309,16 +315,31 @@ class LikelihoodScorer:
         note : str
             A few words for the selection path.
         """
+        return self._judge(small, big, self.predict_t)
+
+    def admits(self, small, big):
+        """:meth:`consistent` of a path that enters by a swap or an addition (``big`` in
+        place of ``small``), with the prediction test at ``entry_predict_t`` when
+        ``predict_t`` does not ask one already.
+
+        A path the backward pass would keep on the likelihood alone has to predict better
+        to come in where a search overturns an earlier verdict (the gain-schedule check's
+        additions, ``selection.schedule_adds``). Returns as :meth:`consistent`."""
+        t = self.predict_t if self.predict_t is not None else self.entry_predict_t
+        return self._judge(small, big, t)
+
+    def _judge(self, small, big, predict_t):
+        """:meth:`consistent` with the prediction test at ``predict_t`` (None: not asked)."""
         if self.test is not None:
             return True, float("nan"), ""
         g = self._daily_gains(small, big)
         need = required_t(self.min_t, len(g), self.min_t_days)
         t, note = _day_t(g, need, "daily gain")
         ok = need <= 0 or not t < need
-        if self.predict_t is not None:
+        if predict_t is not None:
             gk = self._daily_prediction_gains(small, big)
-            tk, note_k = _day_t(gk, self.predict_t, f"{self.predict_horizon / 3600:g}-h prediction")
-            if ok and tk < self.predict_t:
+            tk, note_k = _day_t(gk, predict_t, f"{self.predict_horizon / 3600:g}-h prediction")
+            if ok and tk < predict_t:
                 # a day's squared prediction error is heavy-tailed: one day of a large
                 # disturbance can outweigh nine better ones (Pugh Hall, perfect sensors,
                 # seed 0: the true r240-r243 predicts 6 h ahead better on 9 of 10 days, t
