@@ -155,6 +155,37 @@ def test_a_swap_must_also_win_day_after_day(t, swapped):
         assert f"daily gain t {t:.1f}" in res.reasons[T.name]
 
 
+class EntryScorer(DailyScorer):
+    """``admits(small, big)``: refuses a structure with an edge of ``refused`` that ``small``
+    lacks (a path that would come in and fails the scorer's entry test)."""
+
+    def __init__(self, single, refused):
+        super().__init__(single, {})
+        self.refused, self.asked = set(refused), []
+
+    def admits(self, small, big):
+        new = {c.name for c in big} - {c.name for c in small}
+        self.asked.append(frozenset(new))
+        if new & self.refused:
+            return False, -3.0, "6-h prediction t -3.0 (needs 2)"
+        return self.consistent(small, big)
+
+
+def test_a_path_that_would_come_in_is_asked_the_entry_test_and_a_kept_one_is_not():
+    # U (+200) and T (+30) would be added to S; the entry test refuses both: S stays alone,
+    # kept by the backward pass on `consistent`, which the entry test is not asked of
+    sc = EntryScorer({S.name: 50.0, T.name: 30.0, U.name: 200.0}, {T.name, U.name})
+    res = search_edges([S], sc, direction="backward", margin=10.0, swaps=[S, T, U],
+                       adds=True)
+    assert [c.name for c in res.edges] == [S.name]
+    assert sc.asked == [{U.name}, {T.name}]         # the best first, then the next
+    assert [st.action for st in res.path] == ["start", "keep"]
+    # without the refusal both come in: the test, not the table, kept them out
+    res = search_edges([S], EntryScorer(sc.single, ()), direction="backward", margin=10.0,
+                       swaps=[S, T, U], adds=True)
+    assert sorted(c.name for c in res.edges) == sorted([S.name, T.name, U.name])
+
+
 class SupportScorer(TableScorer):
     """``consistent(small, big)``: the t of the edge ``big`` has and ``small`` lacks when they
     are nested (an edge's own support), else the swap's t."""

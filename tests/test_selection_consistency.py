@@ -29,6 +29,7 @@ def _scorer(min_t):
     sc = LikelihoodScorer.__new__(LikelihoodScorer)   # no data needed for consistent()
     sc.min_t, sc.min_t_days, sc.block, sc.test = min_t, None, 86400.0, None
     sc.predict_t, sc.predict_horizon = None, 6 * 3600.0
+    sc.entry_predict_t = None
     return sc
 
 
@@ -218,6 +219,32 @@ def test_prediction_test_drops_a_gain_that_does_not_predict(monkeypatch):
     small.__dict__.pop("_block_mse"), big.__dict__.pop("_block_mse")     # new numbers
     ok, _, note = sc.consistent(small, big)
     assert ok and "(needs -2), better on 4 of 7 days" in note
+
+
+def test_a_path_that_comes_in_is_asked_the_prediction_test_one_kept_is_not(monkeypatch):
+    """``entry_predict_t``: ``admits`` (a swap or an addition) asks the 6-h prediction test,
+    ``consistent`` (the backward pass keeping a path) does not; with ``predict_t`` set both
+    ask that one."""
+    import thermctl.estimate.likelihood.scoring as scoring
+    small = _fitted(np.full(7, 100.0))
+    big = _fitted(np.full(7, 100.0) - [10.0, 9.0, 11.0, 10.0, 12.0, 9.0, 10.0])
+    mse = {id(small.problem_): np.full(7, 0.10),
+           id(big.problem_): np.array([0.11, 0.12, 0.105, 0.09, 0.13, 0.115, 0.12])}
+    monkeypatch.setattr(scoring, "kstep_block_mse",
+                        lambda pb, eta, horizon, block: (np.arange(7), mse[id(pb)]))
+    sc = _scorer(2.0)
+    assert sc.admits(small, big) == sc.consistent(small, big)      # nothing more asked
+    assert sc.admits(small, big)[0]
+    sc.entry_predict_t = 2.0
+    ok, t, note = sc.admits(small, big)
+    d = mse[id(small.problem_)] - mse[id(big.problem_)]
+    assert not ok and t == pytest.approx(d.mean() / (d.std(ddof=1) / math.sqrt(7)))
+    assert "6-h prediction t" in note and "better on 1 of 7 days" in note
+    kept = sc.consistent(small, big)
+    assert kept[0] and "prediction" not in kept[2]
+    # the scorer's own predict_t is what every path is asked, the one that comes in too
+    sc.predict_t = -2.0
+    assert sc.admits(small, big) == sc.consistent(small, big) and not sc.admits(small, big)[0]
 
 
 @pytest.fixture(scope="module")
