@@ -29,7 +29,7 @@ def _scorer(min_t):
     sc = LikelihoodScorer.__new__(LikelihoodScorer)   # no data needed for consistent()
     sc.min_t, sc.min_t_days, sc.block, sc.test = min_t, None, 86400.0, None
     sc.predict_t, sc.predict_horizon = None, 6 * 3600.0
-    sc.entry_predict_t = None
+    sc.entry_rbar_window = None
     return sc
 
 
@@ -221,30 +221,38 @@ def test_prediction_test_drops_a_gain_that_does_not_predict(monkeypatch):
     assert ok and "(needs -2), better on 4 of 7 days" in note
 
 
-def test_a_path_that_comes_in_is_asked_the_prediction_test_one_kept_is_not(monkeypatch):
-    """``entry_predict_t``: ``admits`` (a swap or an addition) asks the 6-h prediction test,
-    ``consistent`` (the backward pass keeping a path) does not; with ``predict_t`` set both
-    ask that one."""
-    import thermctl.estimate.likelihood.scoring as scoring
-    small = _fitted(np.full(7, 100.0))
-    big = _fitted(np.full(7, 100.0) - [10.0, 9.0, 11.0, 10.0, 12.0, 9.0, 10.0])
-    mse = {id(small.problem_): np.full(7, 0.10),
-           id(big.problem_): np.array([0.11, 0.12, 0.105, 0.09, 0.13, 0.115, 0.12])}
-    monkeypatch.setattr(scoring, "kstep_block_mse",
-                        lambda pb, eta, horizon, block: (np.arange(7), mse[id(pb)]))
+def test_a_path_that_comes_in_must_share_the_other_paths_rbar_one_kept_need_not():
+    """``entry_rbar_window``: ``admits`` (a swap or an addition) also asks the new path's
+    R̄_v to lie within the factor of the median of the other paths'; ``consistent`` (the
+    backward pass keeping a path) does not ask it."""
+    def fit(day_nll, **rbar):
+        f = _fitted(day_nll)
+        f.params_ = {f"rbar_v[air:{k}]": v for k, v in rbar.items()}
+        return f
+    gains = np.array([10.0, 9.0, 11.0, 10.0, 12.0, 9.0, 10.0])
+    small = fit(np.full(7, 100.0), a_b=3.0e-4, b_c=4.0e-4, c_d=3.4e-4)   # median 3.4e-4
     sc = _scorer(2.0)
-    assert sc.admits(small, big) == sc.consistent(small, big)      # nothing more asked
-    assert sc.admits(small, big)[0]
-    sc.entry_predict_t = 2.0
-    ok, t, note = sc.admits(small, big)
-    d = mse[id(small.problem_)] - mse[id(big.problem_)]
-    assert not ok and t == pytest.approx(d.mean() / (d.std(ddof=1) / math.sqrt(7)))
-    assert "6-h prediction t" in note and "better on 1 of 7 days" in note
-    kept = sc.consistent(small, big)
-    assert kept[0] and "prediction" not in kept[2]
-    # the scorer's own predict_t is what every path is asked, the one that comes in too
-    sc.predict_t = -2.0
-    assert sc.admits(small, big) == sc.consistent(small, big) and not sc.admits(small, big)[0]
+    for r_new, inside in ((6.7e-4, True), (7.0e-4, False), (1.71e-4, True), (1.6e-4, False)):
+        big = fit(100.0 - gains, a_b=3.0e-4, b_c=4.0e-4, c_d=3.4e-4, d_e=r_new)
+        sc.entry_rbar_window = None
+        assert sc.admits(small, big) == sc.consistent(small, big)     # nothing more asked
+        sc.entry_rbar_window = 2.0
+        ok, t, note = sc.admits(small, big)
+        assert ok is inside and t == sc.consistent(small, big)[1]
+        assert sc.consistent(small, big)[0]                 # kept paths are not asked
+        if not inside:
+            assert f"×{r_new / 3.4e-4:.2f} the median of the other 3 paths'" in note
+            assert "outside ×0.5–2" in note
+    # a swap: the path that leaves is no "other path"; the first path has none to compare
+    swapped = fit(100.0 - gains, a_b=3.0e-4, b_c=4.0e-4, e_f=9.0e-4)
+    assert not sc.admits(small, swapped)[0]             # ×2.57 the median 3.5e-4 of a-b, b-c
+    first = fit(100.0 - gains, a_b=9.0e-4)
+    assert sc.admits(fit(np.full(7, 100.0)), first)[0]
+    # a gain that does not hold day after day fails as before, whatever its R̄_v
+    sc.min_t = 2.0
+    flat = fit(np.full(7, 100.0) - [70.0, -1, 0, 0, 0, 0, 0], a_b=3.0e-4, b_c=4.0e-4,
+               c_d=3.4e-4, d_e=3.4e-4)
+    assert not sc.admits(small, flat)[0] and not sc.consistent(small, flat)[0]
 
 
 @pytest.fixture(scope="module")

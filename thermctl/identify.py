@@ -202,8 +202,8 @@ class SelectionOptions:
         With ``schedule_check``: after its backward pass, the swaps and additions of the
         selection (``swaps``, ``adds``) on the schedule's likelihood too, so that the check
         may also put in paths the default gain model's selection missed; a path that comes
-        in must also predict 6 h ahead better day after day (the misfit check's test,
-        t >= 2 or the sign test). Off by default (docs/identification.md, "The check with
+        in must also have its R̄_v within ×2 of the median of the model's other paths (the
+        local problems' window). Off by default (docs/identification.md, "The check with
         swaps and additions").
     """
 
@@ -1992,6 +1992,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
     """
     from dataclasses import replace
 
+    from .local import RBAR_WINDOW
     from .selection import air_path_scorer, select_air_paths
     from .structure.search import SelectionStep, as_candidates
 
@@ -2022,10 +2023,11 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
               swaps=sel_kw.get("swaps") if grow else None, adds=grow and sel_kw.get("adds"),
               union=False, gain_schedule="occupied",
               # a path that comes in overturns the selection's verdict on it: it must also
-              # predict 6 h ahead better day after day, as the misfit check asks of every
-              # kept path (without it, 4 of the 10 paths that came in on the broadened
-              # family were false, three of them raising the step-response error 1.7-3 times)
-              entry_predict_t=MISFIT_PREDICT_T if grow else None)
+              # conduct like the other paths' doors, its R̄_v within the local problems'
+              # window of their median (broadened family, session 43's entries: the 6 true
+              # ones at ×0.73-1.23 in the final fits, the false n2-s0, o1-p12 and east-n1 at
+              # ×2.2-4.1; the 6-h prediction test, tried first, ran the other way)
+              entry_rbar_window=RBAR_WINDOW if grow else None)
     scorer = air_path_scorer(spec, cal, **kw)
     try:
         with warnings.catch_warnings():

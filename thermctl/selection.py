@@ -130,7 +130,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
                      ahead=None, swaps=None, adds: bool = False, known=None,
                      final=None, recheck: float | None = RECHECK, union: bool = False,
                      cold_start: dict | None = None, min_t_days: float | None = None,
-                     entry_predict_t: float | None = None,
+                     entry_rbar_window: float | None = None,
                      **estimator_kwargs) -> SelectionResult:
     """Choose the convection edges of a building by model fit.
 
@@ -192,9 +192,10 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     predict_t : float or None
         And in prediction: the t statistic of its daily reduction of the 6-h-ahead
         prediction error (:meth:`LikelihoodScorer.consistent`) [-]; None: not tested.
-    entry_predict_t : float or None
-        That prediction test asked only of a path that comes in by a swap or an addition
-        (:meth:`LikelihoodScorer.admits`) [-]; None: not asked.
+    entry_rbar_window : float or None
+        A path that comes in by a swap or an addition must have its R̄_v within this factor
+        of the median of the other paths' (:meth:`LikelihoodScorer.admits`) [-]; None: not
+        asked.
     workers : int
         Trial fits of a backward step side by side, in threads
         (:meth:`LikelihoodScorer.fit_many`); the selection is the same as with 1.
@@ -244,7 +245,7 @@ def select_air_paths(spec, data, *, candidates="all", criterion: str = "bic",
     scorer = LikelihoodScorer(spec, data, criterion, holdout=holdout, screen=screen,
                               max_iter=max_iter, on_fit=on_fit, min_t=min_t,
                               predict_t=predict_t, cold_start=cold_start,
-                              min_t_days=min_t_days, entry_predict_t=entry_predict_t,
+                              min_t_days=min_t_days, entry_rbar_window=entry_rbar_window,
                               **estimator_kwargs)
     if ahead is not None:
         scorer.adopt(ahead)

@@ -95,10 +95,9 @@ class LikelihoodScorer:
         Consistency an air path must show in prediction: the t statistic of its daily
         reduction of the ``predict_horizon``-ahead prediction error (:meth:`consistent`)
         [-]; None: not tested. Negative: a veto on paths that predict worse.
-    entry_predict_t : float or None
-        The same prediction test asked only of a path that enters by a swap or an addition
-        (:meth:`admits`), not of one the backward pass keeps [-]; None: not asked (with
-        ``predict_t`` set every path is asked that one).
+    entry_rbar_window : float or None
+        A path that comes in by a swap or an addition (:meth:`admits`) must have its R̄_v
+        within this factor of the median of the other paths' [-] (> 1); None: not asked.
     predict_horizon : float
         [s]
     cold_start : dict, optional
@@ -120,7 +119,7 @@ class LikelihoodScorer:
                  tol: float = 1e-9, stall=STALL, on_fit=None,
                  min_t: float = 0.0, block: float = 86400.0, predict_t: float | None = None,
                  predict_horizon: float = 6 * 3600.0, cold_start: dict | None = None,
-                 min_t_days: float | None = None, entry_predict_t: float | None = None,
+                 min_t_days: float | None = None, entry_rbar_window: float | None = None,
                  **estimator_kwargs):
         if criterion not in CRITERIA:
             raise EstimationError(f"criterion must be one of {CRITERIA}, found {criterion!r}")
@@ -142,7 +141,10 @@ class LikelihoodScorer:
         self.min_t_days = None if min_t_days is None else float(min_t_days)
         self.block = float(block)
         self.predict_t = None if predict_t is None else float(predict_t)
-        self.entry_predict_t = None if entry_predict_t is None else float(entry_predict_t)
+        if entry_rbar_window is not None and not entry_rbar_window > 1:
+            raise EstimationError(f"entry_rbar_window must be a factor above 1 or None, found "
+                                  f"{entry_rbar_window!r}")
+        self.entry_rbar_window = None if entry_rbar_window is None else float(entry_rbar_window)
         self.predict_horizon = float(predict_horizon)
         self.cold_start = None if not cold_start else {k: float(v) for k, v in cold_start.items()}
         self.n_fits = 0
@@ -315,31 +317,16 @@ class LikelihoodScorer:
         note : str
             A few words for the selection path.
         """
-        return self._judge(small, big, self.predict_t)
-
-    def admits(self, small, big):
-        """:meth:`consistent` of a path that enters by a swap or an addition (``big`` in
-        place of ``small``), with the prediction test at ``entry_predict_t`` when
-        ``predict_t`` does not ask one already.
-
-        A path the backward pass would keep on the likelihood alone has to predict better
-        to come in where a search overturns an earlier verdict (the gain-schedule check's
-        additions, ``selection.schedule_adds``). Returns as :meth:`consistent`."""
-        t = self.predict_t if self.predict_t is not None else self.entry_predict_t
-        return self._judge(small, big, t)
-
-    def _judge(self, small, big, predict_t):
-        """:meth:`consistent` with the prediction test at ``predict_t`` (None: not asked)."""
         if self.test is not None:
             return True, float("nan"), ""
         g = self._daily_gains(small, big)
         need = required_t(self.min_t, len(g), self.min_t_days)
         t, note = _day_t(g, need, "daily gain")
         ok = need <= 0 or not t < need
-        if predict_t is not None:
+        if self.predict_t is not None:
             gk = self._daily_prediction_gains(small, big)
-            tk, note_k = _day_t(gk, predict_t, f"{self.predict_horizon / 3600:g}-h prediction")
-            if ok and tk < predict_t:
+            tk, note_k = _day_t(gk, self.predict_t, f"{self.predict_horizon / 3600:g}-h prediction")
+            if ok and tk < self.predict_t:
                 # a day's squared prediction error is heavy-tailed: one day of a large
                 # disturbance can outweigh nine better ones (Pugh Hall, perfect sensors,
                 # seed 0: the true r240-r243 predicts 6 h ahead better on 9 of 10 days, t
@@ -350,6 +337,35 @@ class LikelihoodScorer:
                 else:
                     ok, t = False, tk
             note = f"{note}; {note_k}"
+        return ok, t, note
+
+    def admits(self, small, big):
+        """:meth:`consistent` of a path that comes in by a swap or an addition (``big`` in
+        place of ``small``), and with ``entry_rbar_window`` its R̄_v within that factor of
+        the median of ``big``'s other paths.
+
+        The paper's model has one R̄_v for the building: a path whose own value is far
+        from the others' conducts what no door of its length does at theirs, and stands in
+        for something the model lacks. The test is asked where a search overturns an
+        earlier verdict (the gain-schedule check's swaps and additions,
+        ``selection.schedule_adds``), not of the paths it keeps. Returns as
+        :meth:`consistent`."""
+        ok, t, note = self.consistent(small, big)
+        w = self.entry_rbar_window
+        if not ok or w is None:
+            return ok, t, note
+        rb = {k: v for k, v in big.params_.items() if ConvectionParameters.is_rbar(k)}
+        new = set(rb) - set(small.params_)
+        others = [rb[k] for k in rb if k not in new]
+        if not new or not others:
+            return ok, t, note
+        m = float(np.median(others))
+        for k in sorted(new):
+            ratio = rb[k] / m
+            if not abs(math.log(ratio)) <= math.log(w):
+                return False, t, (f"{note}; its R̄_v {rb[k]:.3g} K/(W m) is ×{ratio:.2f} the "
+                                  f"median of the other {len(others)} paths', outside "
+                                  f"×{1 / w:.2g}–{w:g}")
         return ok, t, note
 
     @property
