@@ -212,9 +212,10 @@ def _as_default(row):
     first family, and the broadened family's rows that say session 22). Rows run with
     ``--schedule-check`` alone (session 41, before the gain-schedule check became the
     default) are default runs and lose " [schedule check]"; the factor study's rows are
-    from before it. Session 43's ``--schedule-adds`` rows were run before the paths that
-    come in were asked the 6-h prediction test (session 44): they read " [schedule adds,
-    no entry test]".
+    from before it. Session 43's ``--schedule-adds`` rows were run before a path that
+    comes in by the check was asked anything more: they read " [schedule adds, no entry
+    test]"; the two of commit 93ac9b9 (session 44) asked it the 6-h prediction test, which
+    was not kept: " [schedule adds, 6-h entry test]".
     """
     if row.get("selection") == {"swaps": True} and not row.get("estimation"):
         row = dict(row, case=row["case"].replace(" [swaps]", ""))
@@ -225,6 +226,9 @@ def _as_default(row):
     if (row.get("selection") or {}).get("schedule_adds") and row.get("session", 0) < 44:
         row = dict(row, case=row["case"].replace(" [schedule adds]",
                                                  " [schedule adds, no entry test]"))
+    elif (row.get("selection") or {}).get("schedule_adds") and row.get("commit") == "93ac9b9":
+        row = dict(row, case=row["case"].replace(" [schedule adds]",
+                                                 " [schedule adds, 6-h entry test]"))
     noise = (row.get("estimation") or {}).get("noise")
     if row.get("session", 0) < 20 and noise is None:
         row = dict(row, case=row["case"] + " [noise shared]")

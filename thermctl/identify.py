@@ -2024,9 +2024,10 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
               union=False, gain_schedule="occupied",
               # a path that comes in overturns the selection's verdict on it: it must also
               # conduct like the other paths' doors, its R̄_v within the local problems'
-              # window of their median (broadened family, session 43's entries: the 6 true
-              # ones at ×0.73-1.23 in the final fits, the false n2-s0, o1-p12 and east-n1 at
-              # ×2.2-4.1; the 6-h prediction test, tried first, ran the other way)
+              # window of their median (broadened family, session 43's entries refitted: the
+              # 6 true ones at ×0.73-1.28, the false n2-s0, o1-p12 and east-n1 at ×2.5-4.1;
+              # the 6-h prediction test, tried first, ran the other way: t -2.6 to 4.6 for
+              # the true ones, 3.9 to 5.9 for the false)
               entry_rbar_window=RBAR_WINDOW if grow else None)
     scorer = air_path_scorer(spec, cal, **kw)
     try:

@@ -255,8 +255,8 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
         that are not nested) must reach this [-], and whatever the scorer's own test asks
         (``min_t``, ``predict_t``; ``scorer.admits`` in place of ``consistent`` where the
         scorer has it: what it asks of a path that comes in); scorers without
-        ``consistent`` are not asked. The test protects a kept edge whose own daily gain reaches ``swap_t``; one below it is
-        replaced on the criterion (a positive t) alone.
+        ``consistent`` are not asked. The test protects a kept edge whose own daily gain
+        reaches ``swap_t``; one below it is replaced on the criterion (a positive t) alone.
     adds : bool
         With ``swaps``: when no swap is made, also try adding one of ``swaps`` (screened
         together, the two best refitted, see ``add_refits``); an addition that improves the
