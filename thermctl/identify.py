@@ -2027,7 +2027,7 @@ def _schedule_check(spec, cal, opt, chk, sel_kw, notes, progress):
               # window of their median (broadened family, session 43's entries refitted: the
               # 6 true ones at ×0.73-1.28, the false n2-s0, o1-p12 and east-n1 at ×2.5-4.1;
               # the 6-h prediction test, tried first, ran the other way: t -2.6 to 4.6 for
-              # the true ones, 3.9 to 5.9 for the false)
+              # the true ones, 3.5 to 5.9 for the false)
               entry_rbar_window=RBAR_WINDOW if grow else None)
     scorer = air_path_scorer(spec, cal, **kw)
     try:

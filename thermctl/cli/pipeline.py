@@ -115,9 +115,10 @@ def identify(
     schedule_adds: bool = typer.Option(_D.selection.schedule_adds,
                                        "--schedule-adds/--no-schedule-adds",
                                        help="with --schedule-check: the check also swaps "
-                                       "and adds air paths on the schedule's model (off: "
-                                       "on the broadened test family +6 true and +4 false "
-                                       "paths)."),
+                                       "and adds air paths on the schedule's model, each "
+                                       "with its R̄_v within ×2 of the other paths' median "
+                                       "(off: on the broadened test family +5 true and +2 "
+                                       "false paths)."),
     recheck: float = typer.Option(_D.selection.recheck or 0.0, "--recheck", min=0.0,
                                   help="--selection model, whole building: after a removal "
                                   "the backward pass tries again only the air paths whose "
