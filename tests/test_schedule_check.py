@@ -191,6 +191,19 @@ def test_the_checks_scorer_scores_as_the_search():
     assert value == pytest.approx(sel.path[0].value, rel=1e-10)
 
 
+def _ring_with_schedule_adds(seed):
+    """The broadened family's ring (3R2C plant, 16 days, ``seed``) and its identification
+    with ``selection.schedule_adds`` (intervals skipped)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = generate(days=16, seed=seed, building="ring", walls="random", gains="hourly",
+                      neighbour_noise=0.2, control_minutes=5, plant="rc-exact")
+        meas = read_measurements(tb.data, tb.spec, name="ring")
+        opt = IdentifyOptions(selection=SelectionOptions(schedule_adds=True),
+                              estimation=EstimationOptions(intervals="none"))
+        return tb, identify(meas, opt)
+
+
 @pytest.mark.slow
 def test_schedule_adds_puts_in_the_true_path_the_selection_missed():
     """The broadened family's ring with the 3R2C plant, seed 1, 16 days: the default's
@@ -199,14 +212,7 @@ def test_schedule_adds_puts_in_the_true_path_the_selection_missed():
     schedule's likelihood and puts it in: the 4 true paths, none false (session 43:
     step error 19.6 → 7.0 %; on 15 buildings of the family +6 true paths and +4 false, so
     off by default)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tb = generate(days=16, seed=1, building="ring", walls="random", gains="hourly",
-                      neighbour_noise=0.2, control_minutes=5, plant="rc-exact")
-        meas = read_measurements(tb.data, tb.spec, name="ring")
-        opt = IdentifyOptions(selection=SelectionOptions(schedule_adds=True),
-                              estimation=EstimationOptions(intervals="none"))
-        ident = identify(meas, opt)
+    tb, ident = _ring_with_schedule_adds(seed=1)
     true = {f"air:{'-'.join(sorted(e[:2]))}" for e in tb.truth.edges}
     assert _edges(ident) == true
     note = next(n for n in ident.notes if n.startswith("gain-schedule check"))
@@ -220,14 +226,7 @@ def test_schedule_adds_keeps_out_a_path_whose_rbar_the_others_do_not_share():
     the 3 true paths. The check's additions put in the false n2–s0 (session 43: step error
     5.4 → 16.5 %) at an R̄_v ×2.5 the other paths' median; asked the local problems'
     window (×0.5–2) of a path that comes in, they do not: the 3 true paths, none false."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tb = generate(days=16, seed=0, building="ring", walls="random", gains="hourly",
-                      neighbour_noise=0.2, control_minutes=5, plant="rc-exact")
-        meas = read_measurements(tb.data, tb.spec, name="ring")
-        opt = IdentifyOptions(selection=SelectionOptions(schedule_adds=True),
-                              estimation=EstimationOptions(intervals="none"))
-        ident = identify(meas, opt)
+    tb, ident = _ring_with_schedule_adds(seed=0)
     true = {f"air:{'-'.join(sorted(e[:2]))}" for e in tb.truth.edges}
     assert _edges(ident) == true and "air:n2-s0" not in _edges(ident)
     note = next(n for n in ident.notes if n.startswith("gain-schedule check"))
