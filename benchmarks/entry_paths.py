@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import sys
 import warnings
 from pathlib import Path
@@ -28,7 +27,9 @@ import family as F  # noqa: E402
 
 from thermctl import identify as I  # noqa: E402
 from thermctl.data import read_measurements  # noqa: E402
+from thermctl.estimate.likelihood.scoring import _day_t  # noqa: E402
 from thermctl.identify import IdentifyOptions, identify  # noqa: E402
+from thermctl.model import ConvectionParameters  # noqa: E402
 from thermctl.selection import air_path_scorer  # noqa: E402
 from thermctl.structure.search import as_candidates  # noqa: E402
 
@@ -57,8 +58,9 @@ def _selection_inputs(meas):
 
 
 def _t(g):
+    """The scorer's t statistic of daily gains ``g``, the days better, the days."""
     g = np.asarray(g, float)
-    return float(g.mean() / (g.std(ddof=1) / math.sqrt(len(g)))), int((g > 0).sum()), len(g)
+    return _day_t(g, 0.0, "")[0], int((g > 0).sum()), len(g)
 
 
 def cases():
@@ -96,7 +98,7 @@ def measure(layout, plant, seed, a, d):
         default = {tuple(p) for p in d["found"]}
         cs = as_candidates(spec, [tuple(p) for p in a["found"]])
         full, v = sc.fit(cs)
-        rb = {k: x for k, x in full.params_.items() if k.startswith("rbar_v[")}
+        rb = {k: x for k, x in full.params_.items() if ConvectionParameters.is_rbar(k)}
         rows = []
         for c in cs:
             if c.pair in default:

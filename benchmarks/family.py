@@ -223,12 +223,11 @@ def _as_default(row):
         row = dict(row, case=row["case"].replace(" [adds]", ""))
     if row.get("selection") == {"schedule_check": True}:
         row = dict(row, case=row["case"].replace(" [schedule check]", ""))
-    if (row.get("selection") or {}).get("schedule_adds") and row.get("session", 0) < 44:
-        row = dict(row, case=row["case"].replace(" [schedule adds]",
-                                                 " [schedule adds, no entry test]"))
-    elif (row.get("selection") or {}).get("schedule_adds") and row.get("commit") == "93ac9b9":
-        row = dict(row, case=row["case"].replace(" [schedule adds]",
-                                                 " [schedule adds, 6-h entry test]"))
+    if (row.get("selection") or {}).get("schedule_adds"):
+        tag = (" [schedule adds, no entry test]" if row.get("session", 0) < 44 else
+               " [schedule adds, 6-h entry test]" if row.get("commit") == "93ac9b9" else None)
+        if tag:
+            row = dict(row, case=row["case"].replace(" [schedule adds]", tag))
     noise = (row.get("estimation") or {}).get("noise")
     if row.get("session", 0) < 20 and noise is None:
         row = dict(row, case=row["case"] + " [noise shared]")

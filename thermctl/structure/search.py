@@ -323,14 +323,11 @@ def search_edges(candidates, scorer: Scorer, *, direction: str = "both", start=(
     say = progress or (lambda msg: None)
     consistent = getattr(scorer, "consistent", None)
 
-    # a path that comes in by a swap or an addition may be asked more (LikelihoodScorer.admits)
-    admits = getattr(scorer, "admits", None) or consistent
-
     def holds(small, big):
         return (True, float("nan"), "") if consistent is None else consistent(small, big)
 
-    def enters(small, big):
-        return (True, float("nan"), "") if admits is None else admits(small, big)
+    # a path that comes in by a swap or an addition may be asked more (LikelihoodScorer.admits)
+    enters = getattr(scorer, "admits", None) or holds
 
     entered = {}            # edge name -> how it entered (added, swapped in)
     support = {}            # kept edge name -> daily-gain t of keeping it (the last keep step)
