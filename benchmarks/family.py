@@ -188,7 +188,7 @@ def _fmt(v, spec):
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
 
-SESSION = 44
+SESSION = 45
 _COMMIT = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                          cwd=Path(__file__).parent).stdout.strip() or None
 """Written into every row: the defaults changed with sessions (see ``_as_default``)."""
