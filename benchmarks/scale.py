@@ -90,6 +90,7 @@ JOINT = SplitOptions().joint                    # --joint
 LOOP_GAIN = EstimationOptions().loop_gain        # --loop-gain
 LOCAL_ROWS = SplitOptions().rows                 # --local-rows
 MIN_T_DAYS = SplitOptions().min_t_days           # --local-min-t-days
+ONE_SIDED = SplitOptions().one_sided             # --local-one-sided
 ZONES = [7, 25, 50, 100, 200]
 
 
@@ -223,7 +224,8 @@ def run_one(label, tb, meas, scale, workers, zones) -> Row:
                           split=SplitOptions(scale=scale, workers=workers,
                                              candidates=LOCAL_CANDIDATES,
                                              gain_schedule=GAIN_SCHEDULE, joint=JOINT,
-                                             rows=LOCAL_ROWS, min_t_days=MIN_T_DAYS))
+                                             rows=LOCAL_ROWS, min_t_days=MIN_T_DAYS,
+                                             one_sided=ONE_SIDED))
     last = {"t": 0.0}
     t_start = time.perf_counter()
 
@@ -476,7 +478,12 @@ def main(argv=None) -> Result:
                     help="split.min_t_days: the calibration days the local daily-gain t test "
                          f"is for, longer records ask t·√(days/D) (default {MIN_T_DAYS:g}; "
                          "0: the same t on any record)")
+    ap.add_argument("--local-one-sided", type=float, default=ONE_SIDED, metavar="T",
+                    help="split.one_sided: a path one end keeps is kept when the ends' BIC "
+                         f"changes sum below -T (default {ONE_SIDED}; a negative T: none)")
     args = ap.parse_args(argv)
+    globals()["ONE_SIDED"] = (None if args.local_one_sided is None or args.local_one_sided < 0
+                              else args.local_one_sided)
     globals()["LOCAL_ROWS"] = args.local_rows
     globals()["MIN_T_DAYS"] = args.local_min_t_days or None
     globals()["JOINT"] = args.joint
@@ -503,7 +510,8 @@ def main(argv=None) -> Result:
     out(f"thermctl @ {_git_head()}, {time.strftime('%Y-%m-%d %H:%M')}, "
         f"seed{'s' if len(seeds) > 1 else ''} {' '.join(map(str, seeds))}, "
         f"{args.days:g} generated days (last quarter held back), 5-min data; "
-        f"identify(scale=..., workers=N, intervals='none', split.min_t_days={MIN_T_DAYS}); "
+        f"identify(scale=..., workers=N, intervals='none', split.min_t_days={MIN_T_DAYS}, "
+        f"split.one_sided={ONE_SIDED}); "
         f"OMP_NUM_THREADS="
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}")
     out()

@@ -110,6 +110,37 @@ def test_combine_rules_on_known_votes(small_spec):
         combine(probs, res, "majority")
 
 
+def test_a_path_one_end_keeps_stays_when_the_ends_evidence_sums_below_one_sided(small_spec):
+    """``one_sided``: a path one end keeps is in when the ends' BIC changes sum below -T
+    (strictly), with the R̄_v of the end that kept it; a path no end keeps, one beside a
+    wall (r1-r2) or one whose other end has no finite evidence is not."""
+    probs = local_problems(small_spec)
+    # r1-r3: kept at r1 (-70), r3 wants it a little (-10.5): sum -80.5; r1-r2: kept at r1
+    # (-50), r2 +2: sum -48, but beside the r1|r2 wall; r2-r3: kept by neither, -45 each
+    res = [_fake("r1", ["air:r1-r3", "air:r1-r2"], {"air:r1-r3": -70.0, "air:r1-r2": -50.0},
+                 rb={"air:r1-r3": 2.5e-4, "air:r1-r2": 4e-4}),
+           _fake("r2", [], {"air:r1-r2": 2.0, "air:r2-r3": -45.0}),
+           _fake("r3", [], {"air:r1-r3": -10.5, "air:r2-r3": -45.0})]
+    res = [next(r for r in res if r.zone == p.zone) for p in probs]
+
+    def kept(t):
+        return {v.name: v for v in combine(probs, res, "both", 10.0, one_sided=t) if v.kept}
+
+    assert kept(None) == {}
+    assert set(kept(80.0)) == {"air:r1-r3"}
+    assert kept(80.0)["air:r1-r3"].rbar_v == pytest.approx(2.5e-4)
+    assert "sum to -80.5, below -80" in kept(80.0)["air:r1-r3"].reason
+    assert kept(80.5) == {}                          # strictly below
+    assert set(kept(40.0)) == {"air:r1-r3"}          # r1-r2 beside a wall, r2-r3 no end's
+    assert "r2: out (+2.0)" in next(v for v in combine(probs, res, "both", 10.0, one_sided=40.0)
+                                    if v.name == "air:r1-r2").reason
+    res[[p.zone for p in probs].index("r3")].evidence.pop("air:r1-r3")
+    assert kept(40.0) == {}                          # r3's evidence unknown: not summed
+    # the other rules ignore it
+    assert ({v.name for v in combine(probs, res, "either", 10.0, one_sided=40.0) if v.kept}
+            == {"air:r1-r3", "air:r1-r2"})
+
+
 def test_runners_agree_bit_for_bit(corridor):
     """Serial, two processes and a Dask LocalCluster give the same local results."""
     distributed = pytest.importorskip("distributed")

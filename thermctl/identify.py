@@ -539,6 +539,15 @@ class SplitOptions:
         paper, and a path that needs far less conducts more than a door of its length.
         Measured on the corridor testbed (14 days): docs/scale.md, "One R̄_v for the
         building". None: no test.
+    one_sided : float or None
+        With ``combine="both"``: an air path one end keeps and the other does not is kept
+        when the two ends' BIC changes sum below minus this (the composite likelihood of
+        the two local problems; :func:`thermctl.local.combine`) [-], unless it runs beside
+        a wall; the R̄_v window then judges it as any other. A long path across a corridor
+        conducts little, and 4 in 5 of the true paths the AND rule missed were kept at one
+        end. 80 was chosen on the 196-zone corridor testbed (14 days, seeds 0 and 1: 71 →
+        90 of 108 true paths, 14 → 19 false); on seeds 2–5 and the 49-zone floor
+        (docs/scale.md, "Paths one end keeps"). None (or inf): never.
     search_again : bool
         The local problems at the ends of the paths out by R̄_v are searched once more
         without them (:func:`thermctl.local.settle`). Off by default: on the 196-zone
@@ -562,6 +571,7 @@ class SplitOptions:
     gain_schedule: str | None = None
     joint: bool = False
     rbar_window: float | None = 2.0
+    one_sided: float | None = 80.0
     search_again: bool = False
 
     def splits(self, n_measured: int) -> bool:
@@ -585,6 +595,9 @@ class SplitOptions:
         if self.rbar_window is not None and not self.rbar_window > 1:
             raise DataError(f"identify option split.rbar_window must be a factor above 1 or "
                             f"None, found {self.rbar_window}")
+        if self.one_sided is not None and not self.one_sided >= 0:
+            raise DataError(f"identify option split.one_sided must be >= 0 or None, found "
+                            f"{self.one_sided}")
         if self.latent_depth is not None and self.latent_depth < 1:
             raise DataError(f"identify option split.latent_depth must be >= 1 or None, found "
                             f"{self.latent_depth}")
@@ -1016,7 +1029,7 @@ def _identify_local(meas, cal, val, opt, progress, client) -> Identification:
                         candidates=opt.split.candidates, level=opt.structure.level,
                         s_min=opt.structure.s_min, confirm=opt.split.confirm,
                         joint=opt.split.joint, rbar_window=opt.split.rbar_window,
-                        search_again=opt.split.search_again)
+                        one_sided=opt.split.one_sided, search_again=opt.split.search_again)
     return _finish_local(meas, cal, val, opt, li, progress, client)
 
 
@@ -1245,7 +1258,8 @@ def identify_many(items, options: IdentifyOptions | None = None, progress=None,
             cal, val = splits[k]
             li, _, _ = settle([problems[i] for i in idx], [results[i] for i in idx], cal.frame,
                               rule=opt.split.combine, rbar_window=opt.split.rbar_window,
-                              again=opt.split.search_again, wall=wall,
+                              one_sided=opt.split.one_sided, again=opt.split.search_again,
+                              wall=wall,
                               workers=opt.split.workers, client=client, progress=progress,
                               **opt.local_fit_options())
             if opt.split.joint:
@@ -1275,7 +1289,7 @@ def _local_stability(li, cal, opt, progress, client, notes):
                            seed=opt.selection.stability_seed, rule=li.rule,
                            workers=opt.split.workers, client=client or opt.split.scheduler,
                            progress=progress, confirm=opt.split.confirm,
-                           **opt.local_fit_options())
+                           one_sided=li.one_sided, **opt.local_fit_options())
     dropped = stab.below(li.edges, thr)
     stab.dropped = dropped
     _stability_short_note(stab, notes)

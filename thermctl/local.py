@@ -60,7 +60,7 @@ from .spec import WALL_CLASSES, BuildingSpec, Distance, Zone, wall_class
 
 __all__ = ["LocalProblem", "LocalResult", "LocalIdentification", "local_problems",
            "propose_sin", "local_cost_problem", "fit_local", "run_local", "combine", "assemble",
-           "identify_local", "joint_local", "COMBINE_RULES",
+           "identify_local", "joint_local", "COMBINE_RULES", "ONE_SIDED",
            "combine_ua_factors", "combine_zone_params", "zone_params",
            "conduction_zone_params"]
 
@@ -71,6 +71,11 @@ COMBINE_RULES = ("sum", "both", "either")
 RBAR_WINDOW = 2.0
 """A combined air path whose R̄_v is more than this factor from the building's (the median
 over its kept paths) is dropped (:func:`rbar_consensus`) [-]."""
+
+ONE_SIDED = 80.0
+"""An air path kept at one end only (and not beside a wall) stays when its two ends' BIC
+changes sum below minus this (:func:`combine`) [-]; chosen on the 196-zone corridor
+testbed, seeds 0 and 1, from 60, 80 and 100 (docs/scale.md, "Paths one end keeps")."""
 
 RBAR_WINDOW_MIN_PATHS = 8
 """Kept air paths (with a local R̄_v) a building needs before :func:`rbar_consensus` judges
@@ -1110,7 +1115,8 @@ class EdgeVerdict:
         return math.isfinite(self.rbar_ratio)
 
 
-def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list[EdgeVerdict]:
+def combine(problems, results, rule: str = "both", margin: float = 10.0,
+            one_sided: float | None = None) -> list[EdgeVerdict]:
     """Join the local verdicts on every candidate air path.
 
     Parameters
@@ -1127,6 +1133,13 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
         false.
     margin : float
         [-]
+    one_sided : float or None
+        With ``both``: a path one end keeps and the other does not is kept too when its
+        BIC changes summed over the ends that see it (each finite) are below
+        ``-one_sided`` [-]: the composite likelihood of the two local problems wants it
+        by that much. Not a path beside a wall: to temperature data it is one term with
+        the wall's conduction, and such a path kept at one end was, on the corridor
+        testbed, most often two neighbouring offices. None: no such path is kept.
 
     Returns
     -------
@@ -1136,6 +1149,8 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
     if rule not in COMBINE_RULES:
         raise EstimationError(f"combine rule must be one of {COMBINE_RULES}, found {rule!r}")
     seen: dict[str, dict] = {}
+    walls = set() if one_sided is None else {
+        frozenset((w.a, w.b)) for p in problems for w in getattr(p.spec, "walls", ())}
     for p, r in zip(problems, results):
         for a, b, d in p.candidates:
             e = seen.setdefault(air_path_name(a, b), {"a": min(a, b), "b": max(a, b), "d": d,
@@ -1162,8 +1177,15 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
             out.append(EdgeVerdict(e["a"], e["b"], e["d"], False, {}, float("nan"),
                                    "undecided: every local problem that sees it failed"))
             continue
+        by_sum = ""
         if rule == "both":
             kept = all(votes.values())
+            ev = list(e["ev"].values())
+            if (not kept and one_sided is not None and any(votes.values())
+                    and frozenset((e["a"], e["b"])) not in walls
+                    and all(np.isfinite(ev)) and sum(ev) < -one_sided):
+                kept, by_sum = True, (f"; kept at one end, and the ends' BIC changes sum to "
+                                      f"{sum(ev):+.1f}, below -{one_sided:g}")
         elif rule == "either":
             kept = any(votes.values())
         else:
@@ -1175,7 +1197,7 @@ def combine(problems, results, rule: str = "both", margin: float = 10.0) -> list
         desc = ", ".join(f"{z}: {'kept' if votes[z] else 'out'} ({e['ev'][z]:+.1f})"
                          + (f" when tested alone ({tested[z]})" if z in tested else "")
                          for z in votes)
-        reason = f"{'in' if kept else 'out'} by rule {rule!r}: {desc}"
+        reason = f"{'in' if kept else 'out'} by rule {rule!r}: {desc}{by_sum}"
         if kept and not rbs:
             reason += "; no local fit kept it, R̄_v from the global refit"
         out.append(EdgeVerdict(e["a"], e["b"], e["d"], kept, dict(e["ev"]), rb, reason))
@@ -1248,7 +1270,8 @@ def rbar_consensus(verdicts, window: float | None = RBAR_WINDOW,
 
 
 def settle(problems, results, frame, *, rule: str = "both",
-           rbar_window: float | None = RBAR_WINDOW, again: bool = True,
+           rbar_window: float | None = RBAR_WINDOW, one_sided: float | None = ONE_SIDED,
+           again: bool = True,
            wall: float = float("nan"), workers: int | None = None, client=None,
            progress=None, **kwargs) -> tuple[LocalIdentification, list, list]:
     """:func:`assemble`, and (``again``) the local problems at the ends of the paths out by
@@ -1268,7 +1291,7 @@ def settle(problems, results, frame, *, rule: str = "both",
         Of :func:`run_local`, in the same order.
     frame : pandas.DataFrame
         Calibration data.
-    rule, rbar_window, wall
+    rule, rbar_window, one_sided, wall
         As :func:`assemble`.
     again : bool
         Search the ends again; False: :func:`assemble` alone.
@@ -1284,7 +1307,7 @@ def settle(problems, results, frame, *, rule: str = "both",
     """
     from dataclasses import replace
     margin = kwargs.get("margin", 10.0)
-    li = assemble(problems, results, rule, margin, wall, rbar_window)
+    li = assemble(problems, results, rule, margin, wall, rbar_window, one_sided)
     out = {v.name: v for v in li.verdicts if v.out_by_rbar} if again else {}
     ends = [i for i, p in enumerate(problems)
             if any(air_path_name(a, b) in out for a, b, _ in p.candidates)]
@@ -1307,7 +1330,7 @@ def settle(problems, results, frame, *, rule: str = "both",
     for i, p, r in zip(ends, redo, got):
         problems[i], results[i] = p, r
     li2 = assemble(problems, results, rule, margin, wall + time.perf_counter() - t0,
-                   rbar_window)
+                   rbar_window, one_sided)
     # the paths no problem offers any more keep the verdict that put them out
     seen = {v.name for v in li2.verdicts}
     li2.verdicts = sorted(li2.verdicts + [v for nm, v in out.items() if nm not in seen],
@@ -1345,6 +1368,8 @@ class LocalIdentification:
         when it judged none.
     rbar_window : float or None
         Its factor [-].
+    one_sided : float or None
+        :func:`combine`'s ``one_sided`` [-].
     """
 
     problems: list
@@ -1359,6 +1384,7 @@ class LocalIdentification:
     ua_factor: dict = field(default_factory=dict)
     rbar_v_building: float = float("nan")
     rbar_window: float | None = None
+    one_sided: float | None = None
 
     @property
     def reasons(self) -> dict:
@@ -1425,7 +1451,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                    candidates: str = "all", level: float = 0.05,
                    s_min: float = 0.25, min_t: float = 0.0, confirm: bool = False,
                    joint: bool = False, rbar_window: float | None = RBAR_WINDOW,
-                   search_again: bool = False, **options) -> LocalIdentification:
+                   one_sided: float | None = ONE_SIDED, search_again: bool = False,
+                   **options) -> LocalIdentification:
     """Air paths and per-edge R̄_v of a whole building from its local problems.
 
     Parameters
@@ -1467,6 +1494,9 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
     rbar_window : float or None
         Combined air paths whose R̄_v is more than this factor from the building's median
         are out (:func:`rbar_consensus`) [-]; None: no test.
+    one_sided : float or None
+        With ``rule="both"``: a path kept at one end only is kept when the ends' BIC
+        changes sum below minus this (:func:`combine`) [-]; None: never.
     search_again : bool
         The problems at the ends of the paths out by R̄_v are searched again without them
         (:func:`settle`; with ``confirm``, not tested again).
@@ -1496,7 +1526,7 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                                 progress=progress, criterion=criterion, margin=margin,
                                 solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
     li, _, _ = settle(problems, results, frame, rule=rule, rbar_window=rbar_window,
-                      again=search_again, wall=time.perf_counter() - t0, workers=workers,
+                      one_sided=one_sided, again=search_again, wall=time.perf_counter() - t0, workers=workers,
                       client=client, progress=progress, criterion=criterion, margin=margin,
                       solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
     if joint:
@@ -1507,19 +1537,20 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
 
 
 def assemble(problems, results, rule: str = "both", margin: float = 10.0,
-             wall: float = float("nan"),
-             rbar_window: float | None = RBAR_WINDOW) -> LocalIdentification:
-    """A :class:`LocalIdentification` from fitted local problems (:func:`combine`, then
-    :func:`rbar_consensus` with ``rbar_window``, and the combined parameters); ``wall`` is
-    the wall time it took [s]."""
-    verdicts, med = rbar_consensus(combine(problems, results, rule, margin), rbar_window)
+             wall: float = float("nan"), rbar_window: float | None = RBAR_WINDOW,
+             one_sided: float | None = ONE_SIDED) -> LocalIdentification:
+    """A :class:`LocalIdentification` from fitted local problems (:func:`combine` with
+    ``one_sided``, then :func:`rbar_consensus` with ``rbar_window``, and the combined
+    parameters); ``wall`` is the wall time it took [s]."""
+    verdicts, med = rbar_consensus(combine(problems, results, rule, margin, one_sided),
+                                   rbar_window)
     edges = [(v.a, v.b, v.d) for v in verdicts if v.kept]
     rb = {v.name: v.rbar_v for v in verdicts if v.kept}
     taus = [r.tau0 for r in results if math.isfinite(r.tau0)]
     tau0 = float(np.median(taus)) if taus else float("nan")
     return LocalIdentification(problems, results, verdicts, edges, rb, tau0, rule, wall,
                                float(sum(r.cpu for r in results)),
-                               combine_ua_factors(results), med, rbar_window)
+                               combine_ua_factors(results), med, rbar_window, one_sided)
 
 
 def _zone_of(name: str):

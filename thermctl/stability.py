@@ -313,7 +313,8 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
 def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0.5,
                     block_days: int = 2, seed: int = 0, rule: str = "both",
                     margin: float = 10.0, workers: int | None = None, client=None,
-                    progress=None, confirm: bool = False, **fit_kwargs) -> StabilityResult:
+                    progress=None, confirm: bool = False, one_sided: float | None = None,
+                    **fit_kwargs) -> StabilityResult:
     """Selection frequency of every candidate air path of the local problems.
 
     Every resample runs every local problem (:func:`thermctl.local.run_local`: the
@@ -336,6 +337,8 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
     confirm : bool
         With ``rule="both"``, one-sided paths are tested at their other end on each
         resample (:func:`thermctl.local.confirm_local`), as on the full data.
+    one_sided : float or None
+        :func:`thermctl.local.combine`'s, as on the full data [-].
     **fit_kwargs
         Passed to :func:`thermctl.local.fit_local`.
 
@@ -366,7 +369,8 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
         res = results[b * n:(b + 1) * n]
         failed = [r for r in res if r.error]
         err = None if len(failed) < n else failed[0].error
-        edges = [] if err else [v.name for v in combine(problems, res, rule, margin) if v.kept]
+        edges = [] if err else [v.name for v in combine(problems, res, rule, margin, one_sided)
+                                if v.kept]
         out.append(StabilityResample(b, [str(d) for d in ks], edges,
                                      float(sum(r.cpu for r in res)),
                                      float(sum(r.time for r in res)), err))

@@ -278,6 +278,10 @@ def identify(
         _D.split.rbar_window, "--local-rbar-window", help="Local problems: an air path whose "
         "R̄_v is more than this factor from the building's median (8 paths or more) is out: "
         "it conducts more (or less) than a door of its length; 0: off."),
+    local_one_sided: float = typer.Option(
+        _D.split.one_sided, "--local-one-sided", min=0, help="Local problems, --combine "
+        "both: an air path one end keeps and the other does not is kept too when the two "
+        "ends' BIC changes sum below minus this (not a path beside a wall); inf: never."),
     local_search_again: bool = typer.Option(
         _D.split.search_again, "--local-search-again/--no-local-search-again",
         help="Local problems: search the ends of the air paths out by R̄_v again without "
@@ -341,7 +345,7 @@ def identify(
                            min_t_days=local_min_t_days or None, confirm=local_confirm,
                            joint=local_joint,
                            rbar_window=local_rbar_window or None,
-                           search_again=local_search_again),
+                           one_sided=local_one_sided, search_again=local_search_again),
         calibration=_window(calibration, "--calibration"),
         validation=_window(validation, "--validation")).check()
     with progress("identify") as bar:
