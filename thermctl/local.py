@@ -1526,7 +1526,8 @@ def identify_local(spec: BuildingSpec, frame, *, rule: str = "both", criterion: 
                                 progress=progress, criterion=criterion, margin=margin,
                                 solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
     li, _, _ = settle(problems, results, frame, rule=rule, rbar_window=rbar_window,
-                      one_sided=one_sided, again=search_again, wall=time.perf_counter() - t0, workers=workers,
+                      one_sided=one_sided, again=search_again, wall=time.perf_counter() - t0,
+                      workers=workers,
                       client=client, progress=progress, criterion=criterion, margin=margin,
                       solar=solar, fit_rows=fit_rows, min_t=min_t, **options)
     if joint:
