@@ -171,6 +171,9 @@ def run_case(study, name, kwargs, seed, days, estimation=None, selection=None):
         if per and all(i is not None for i in per):
             row["covers"] = all(i.lower <= r_true <= i.upper for i in per)
     row["notes"] = [str(n)[:200] for n in ident.notes]
+    het = getattr(ident.intervals, "heterogeneity", None)
+    if het:                             # since session 45: the per-path values behind it
+        row["per_path_rbar_v"] = {str(k): float(v) for k, v in het["rbar_v"].items()}
     ms_min = minimum_flows(tb.inputs[:, tb.network.input_slices()["ms"]])
     if tb.settings.get("family", {}).get("plant") == "fd":
         G0 = tb.plant().step_responses(ms_min, HORIZONS_H)
