@@ -546,7 +546,7 @@ class SplitOptions:
         a wall; the R̄_v window then judges it as any other. A long path across a corridor
         conducts little, and 4 in 5 of the true paths the AND rule missed were kept at one
         end. 80 was chosen on the 196-zone corridor testbed (14 days, seeds 0 and 1: 71 →
-        90 of 108 true paths, 14 → 19 false); on seeds 2–5 and the 49-zone floor
+        90 of 108 true paths, 14 → 17 false); measured on seeds 2–7 and the 49-zone floor
         (docs/scale.md, "Paths one end keeps"). None (or inf): never.
     search_again : bool
         The local problems at the ends of the paths out by R̄_v are searched once more
