@@ -31,6 +31,7 @@ import numpy as np
 
 from ._parallel import run_tasks
 from .errors import DataError, EstimationError
+from .local import ONE_SIDED
 
 __all__ = ["StabilityResult", "StabilityResample", "resample_days", "stability_selection",
            "stability_local", "STABILITY_THRESHOLD"]
@@ -313,7 +314,7 @@ def stability_selection(spec, cal, *, resamples: int = 10, fraction: float = 0.5
 def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0.5,
                     block_days: int = 2, seed: int = 0, rule: str = "both",
                     margin: float = 10.0, workers: int | None = None, client=None,
-                    progress=None, confirm: bool = False, one_sided: float | None = None,
+                    progress=None, confirm: bool = False, one_sided: float | None = ONE_SIDED,
                     **fit_kwargs) -> StabilityResult:
     """Selection frequency of every candidate air path of the local problems.
 
@@ -338,7 +339,8 @@ def stability_local(problems, frame, *, resamples: int = 10, fraction: float = 0
         With ``rule="both"``, one-sided paths are tested at their other end on each
         resample (:func:`thermctl.local.confirm_local`), as on the full data.
     one_sided : float or None
-        :func:`thermctl.local.combine`'s, as on the full data [-].
+        :func:`thermctl.local.combine`'s, as on the full data (default
+        :data:`thermctl.local.ONE_SIDED`, as :func:`thermctl.local.identify_local`'s) [-].
     **fit_kwargs
         Passed to :func:`thermctl.local.fit_local`.
 
